@@ -1,0 +1,1 @@
+"""The ROS-free calibration engine: numpy, scipy and OpenCV only."""

@@ -1,0 +1,63 @@
+"""The calibration checkerboard: corner coordinates and square colours.
+
+Corners are counted as ROS camera_calibration and OpenCV count them: ``cols`` x ``rows``
+interior corners, ordered row by row. Corner ``i`` sits at ``(i % cols, i // cols) * square``
+on the board plane (z = 0). The square whose lower corner is at ``(i, j) * square``
+(``i`` from -1 to ``cols - 1``, ``j`` from -1 to ``rows - 1``) is dark when ``i + j`` is even,
+so the top-left square of the pattern is dark, as on a printed OpenCV board.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CalibrationError
+
+
+@dataclass(frozen=True)
+class Board:
+    """A checkerboard with ``cols`` x ``rows`` interior corners and squares of ``square`` metres."""
+
+    cols: int
+    rows: int
+    square: float
+
+    def __post_init__(self) -> None:
+        if int(self.cols) != self.cols or int(self.rows) != self.rows:
+            raise CalibrationError(f"board size must be whole numbers, got {self.cols}x{self.rows}")
+        if self.cols < 2 or self.rows < 2:
+            raise CalibrationError(
+                f"board must have at least 2x2 interior corners, got {self.cols}x{self.rows}")
+        if not (np.isfinite(self.square) and self.square > 0):
+            raise CalibrationError(f"square size must be a positive length in metres, got {self.square}")
+
+    @property
+    def n_corners(self) -> int:
+        return self.cols * self.rows
+
+    @property
+    def pattern_size(self) -> tuple[int, int]:
+        """The ``patternSize`` OpenCV's chessboard detectors expect."""
+        return (self.cols, self.rows)
+
+    def object_points(self, ids: np.ndarray | None = None) -> np.ndarray:
+        """Corner positions on the board plane, metres, shape (N, 3)."""
+        idx = np.arange(self.n_corners) if ids is None else np.asarray(ids, dtype=int)
+        pts = np.zeros((idx.size, 3))
+        pts[:, 0] = (idx % self.cols) * self.square
+        pts[:, 1] = (idx // self.cols) * self.square
+        return pts
+
+    def is_white(self, x: np.ndarray, y: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """True where board-plane points (metres) lie on a white square, at least ``margin``
+        (a fraction of the square) away from its edges and inside the squared area."""
+        u = np.asarray(x, dtype=float) / self.square
+        v = np.asarray(y, dtype=float) / self.square
+        i = np.floor(u)
+        j = np.floor(v)
+        fu = u - i
+        fv = v - j
+        inside = (i >= -1) & (i <= self.cols - 1) & (j >= -1) & (j <= self.rows - 1)
+        away = (fu >= margin) & (fu <= 1 - margin) & (fv >= margin) & (fv <= 1 - margin)
+        return inside & away & ((i + j) % 2 == 1)

@@ -1,0 +1,150 @@
+"""The plumb_bob camera model (OpenCV / ROS CameraInfo) with analytic Jacobians.
+
+Intrinsics are packed as ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``. Depth is either ``z``
+(distance along the optical axis, REP 118) or ``radial`` (distance from the optical centre,
+what PMD-class sensors measure).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .errors import CalibrationError
+
+DEPTH_CONVENTIONS = ("z", "radial")
+N_INTRINSICS = 9
+
+
+def check_convention(convention: str) -> str:
+    if convention not in DEPTH_CONVENTIONS:
+        raise CalibrationError(f"depth convention must be 'z' or 'radial', got {convention!r}")
+    return convention
+
+
+@dataclass
+class Projection:
+    """Pixels and, when asked for, their derivatives by point (N,2,3), fx..cy (N,2,4), D (N,2,5)."""
+
+    pixels: np.ndarray
+    d_point: np.ndarray | None = None
+    d_k: np.ndarray | None = None
+    d_dist: np.ndarray | None = None
+
+
+def split_intrinsics(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K (3x3) and D (5,) from the packed intrinsics."""
+    fx, fy, cx, cy = params[:4]
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    return K, np.asarray(params[4:9], dtype=float).copy()
+
+
+def pack_intrinsics(K: np.ndarray, D: np.ndarray) -> np.ndarray:
+    D5 = np.zeros(5)
+    D = np.asarray(D, dtype=float).ravel()
+    D5[: min(5, D.size)] = D[:5]
+    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *D5])
+
+
+def _distort(x: np.ndarray, y: np.ndarray, D: np.ndarray, jac: bool):
+    k1, k2, p1, p2, k3 = D
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    if not jac:
+        return xd, yd, None, None
+    dr = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d(radial)/d(r2)
+    dxy = np.empty(x.shape + (2, 2))
+    dxy[..., 0, 0] = radial + 2 * x * x * dr + 2 * p1 * y + 6 * p2 * x
+    dxy[..., 0, 1] = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
+    dxy[..., 1, 0] = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
+    dxy[..., 1, 1] = radial + 2 * y * y * dr + 6 * p1 * y + 2 * p2 * x
+    dD = np.empty(x.shape + (2, 5))
+    dD[..., 0, :] = np.stack([x * r2, x * r2 * r2, 2 * x * y, r2 + 2 * x * x, x * r2 ** 3], -1)
+    dD[..., 1, :] = np.stack([y * r2, y * r2 * r2, r2 + 2 * y * y, 2 * x * y, y * r2 ** 3], -1)
+    return xd, yd, dxy, dD
+
+
+def project(points: np.ndarray, params: np.ndarray, jac: bool = False) -> Projection:
+    """Project camera-frame points (N,3) to distorted pixels (N,2)."""
+    X = np.asarray(points, dtype=float)
+    fx, fy, cx, cy = params[:4]
+    iz = 1.0 / X[:, 2]
+    x = X[:, 0] * iz
+    y = X[:, 1] * iz
+    xd, yd, dxy, dD = _distort(x, y, np.asarray(params[4:9], dtype=float), jac)
+    pix = np.stack([fx * xd + cx, fy * yd + cy], axis=1)
+    if not jac:
+        return Projection(pix)
+    f = np.array([fx, fy])
+    dn = np.zeros((X.shape[0], 2, 3))  # d(x, y)/d(X, Y, Z)
+    dn[:, 0, 0] = iz
+    dn[:, 1, 1] = iz
+    dn[:, 0, 2] = -x * iz
+    dn[:, 1, 2] = -y * iz
+    d_point = f[None, :, None] * np.einsum("nij,njk->nik", dxy, dn)
+    d_k = np.zeros((X.shape[0], 2, 4))
+    d_k[:, 0, 0] = xd
+    d_k[:, 1, 1] = yd
+    d_k[:, 0, 2] = 1.0
+    d_k[:, 1, 3] = 1.0
+    return Projection(pix, d_point, d_k, f[None, :, None] * dD)
+
+
+def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float = 1e-9,
+                         max_iter: int = 50) -> np.ndarray:
+    """Normalised image coordinates (N,2) of distorted pixels, by Newton's method to ``tol_px``."""
+    pix = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    fx, fy, cx, cy = params[:4]
+    D = np.asarray(params[4:9], dtype=float)
+    target = np.stack([(pix[:, 0] - cx) / fx, (pix[:, 1] - cy) / fy], axis=1)
+    xy = target.copy()
+    scale = np.array([fx, fy])
+    for _ in range(max_iter):
+        xd, yd, dxy, _ = _distort(xy[:, 0], xy[:, 1], D, True)
+        err = np.stack([xd, yd], axis=1) - target
+        if np.all(np.abs(err * scale) < tol_px):
+            break
+        step = np.linalg.solve(dxy, err[..., None])[..., 0]
+        xy = xy - step
+    return xy
+
+
+def rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Viewing rays (N,3) with z = 1 through distorted pixels."""
+    xy = undistort_normalized(pixels, params)
+    return np.column_stack([xy, np.ones(len(xy))])
+
+
+def depth_of(points: np.ndarray, convention: str) -> tuple[np.ndarray, np.ndarray]:
+    """Depth of camera-frame points in the given convention, and its gradient (N,3)."""
+    X = np.asarray(points, dtype=float)
+    if convention == "z":
+        grad = np.zeros_like(X)
+        grad[:, 2] = 1.0
+        return X[:, 2].copy(), grad
+    norm = np.linalg.norm(X, axis=1)
+    return norm, X / norm[:, None]
+
+
+def points_from_depth(rays_z1: np.ndarray, depth: np.ndarray, convention: str) -> np.ndarray:
+    """3D points along rays (z = 1) at the given depth."""
+    scale = depth if convention == "z" else depth / np.linalg.norm(rays_z1, axis=1)
+    return rays_z1 * scale[:, None]
+
+
+def transform(rvec: np.ndarray, tvec: np.ndarray, points: np.ndarray,
+              jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Board points to the camera frame, and d(point)/d(rvec, tvec) (N,3,6) when asked."""
+    R, dR = cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))
+    X = points @ R.T + np.asarray(tvec, dtype=float).reshape(1, 3)
+    if not jac:
+        return X, None
+    # cv2 gives dR (3x9): row k is d(R.ravel())/d(rvec_k).
+    dRk = dR.reshape(3, 3, 3)
+    J = np.zeros((len(points), 3, 6))
+    J[:, :, :3] = np.einsum("kij,nj->nik", dRk, points)
+    J[:, 0, 3] = J[:, 1, 4] = J[:, 2, 5] = 1.0
+    return X, J

@@ -1,0 +1,427 @@
+"""A synthetic time-of-flight camera looking at the calibration checkerboard.
+
+Tests and demos need frames whose truth is known exactly: the corner pixels, the corner depths
+and the board pose. ``render`` draws the amplitude (IR) and depth images of a ``Board`` seen by a
+plumb_bob camera by inverse mapping: every pixel (and every sub-sample, for anti-aliasing) is
+traced back along its viewing ray to the board plane, so the geometry is that of
+``core.camera`` to rounding error and nothing is re-projected or resampled.
+
+Pixel ``(u, v)`` is centred on image coordinate ``(u, v)``, as in OpenCV, so the corners that
+``cv2.findChessboardCornersSB`` returns are directly comparable with ``Frame.corners``.
+No ROS here: numpy and OpenCV only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from .core import camera as cam
+from .core.board import Board
+from .core.errors import CalibrationError
+
+RngLike = np.random.Generator | int | None
+
+
+
+@dataclass(frozen=True)
+class SimCamera:
+    """Intrinsics packed as in ``core.camera`` ([fx, fy, cx, cy, k1, k2, p1, p2, k3]) and the
+    image size in pixels."""
+
+    params: np.ndarray
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.params, dtype=float).ravel()
+        if p.size != cam.N_INTRINSICS or not np.all(np.isfinite(p)):
+            raise CalibrationError(f"camera params must be {cam.N_INTRINSICS} finite numbers")
+        if p[0] <= 0 or p[1] <= 0:
+            raise CalibrationError("focal lengths must be positive")
+        if int(self.width) < 2 or int(self.height) < 2:
+            raise CalibrationError(
+                f"image must be at least 2x2 pixels, got {self.width}x{self.height}")
+        object.__setattr__(self, "params", p)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    @property
+    def K(self) -> np.ndarray:
+        return cam.split_intrinsics(self.params)[0]
+
+    @property
+    def D(self) -> np.ndarray:
+        return cam.split_intrinsics(self.params)[1]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height), the order OpenCV wants."""
+        return (self.width, self.height)
+
+
+def pmd_camera() -> SimCamera:
+    """A PMD CamCube-like sensor (200x200, f = 284.4 px), with mild barrel distortion."""
+    return SimCamera(np.array([284.4, 284.4, 100.0, 100.0, -0.1, 0.02, 0.0, 0.0, 0.0]), 200, 200)
+
+
+def azure_kinect_camera() -> SimCamera:
+    """An Azure Kinect NFOV-unbinned-like sensor (640x576), the large case for speed."""
+    return SimCamera(np.array([504.0, 504.0, 320.0, 288.0, -0.08, 0.015, 0.0005, -0.0003, 0.0]),
+                     640, 576)
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Sensor errors added to a rendered frame. All zero: a noiseless frame.
+
+    ``depth`` is the depth standard deviation (m) of a white square 1 m away facing the camera;
+    elsewhere it grows as sqrt(that amplitude / pixel amplitude), because ToF depth noise is
+    shot noise, so dark squares and far or tilted boards are noisier. ``depth_const`` (m) is
+    added in quadrature to every pixel (the paper's protocol: 10 mm white noise). ``offset`` (m)
+    is a systematic bias (a Kinect v2 reads about +25 mm). The wiggling error is
+    ``wiggle_amplitude * sin(2 pi d / wiggle_period + wiggle_phase)`` of the true depth ``d`` in
+    the frame's convention. ``invalid_fraction`` of pixels, drawn at random, lose their depth.
+    ``amplitude`` is the amplitude standard deviation as a fraction of full scale.
+    """
+
+    depth: float = 0.0
+    depth_const: float = 0.0
+    offset: float = 0.0
+    wiggle_amplitude: float = 0.0
+    wiggle_period: float = 0.5
+    wiggle_phase: float = 0.0
+    invalid_fraction: float = 0.0
+    amplitude: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("depth", "depth_const", "wiggle_amplitude", "amplitude"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise CalibrationError(f"noise {name} must be a non-negative number, got {v}")
+        if not (np.isfinite(self.wiggle_period) and self.wiggle_period > 0):
+            raise CalibrationError(f"wiggle period must be positive, got {self.wiggle_period}")
+        if not (0.0 <= self.invalid_fraction <= 1.0):
+            raise CalibrationError(
+                f"invalid fraction must be in [0, 1], got {self.invalid_fraction}")
+        if not (np.isfinite(self.offset) and np.isfinite(self.wiggle_phase)):
+            raise CalibrationError("noise offset and wiggle phase must be finite")
+
+
+@dataclass
+class Frame:
+    """One rendered frame and its exact truth.
+
+    ``depth`` is what the sensor reports (float32 m, noisy, invalid pixels NaN or 0);
+    ``depth_true`` is the noiseless float64 depth (with flying pixels, if rendered) so tests can
+    measure the noise; ``coverage`` is the fraction of each pixel covered by the board.
+    ``corners`` (N,2) and ``corner_depth`` (N,) are the true corner pixels and depths, in the
+    board's corner order and the frame's depth convention.
+    """
+
+    amplitude: np.ndarray
+    depth: np.ndarray
+    corners: np.ndarray
+    corner_depth: np.ndarray
+    rvec: np.ndarray
+    tvec: np.ndarray
+    K: np.ndarray
+    D: np.ndarray
+    convention: str
+    depth_true: np.ndarray = field(repr=False)
+    coverage: np.ndarray = field(repr=False)
+
+
+def _rng(rng: RngLike) -> np.random.Generator:
+    # None means seed 0, not OS entropy: a forgotten seed must not make a test flaky.
+    return np.random.default_rng(0 if rng is None else rng)
+
+
+def _interp_axis(values: np.ndarray, pos: np.ndarray, axis: int) -> np.ndarray:
+    """Linear interpolation of a regular grid along ``axis`` at index positions ``pos``,
+    extrapolating linearly past the ends (sub-samples of edge pixels lie outside the centres)."""
+    n = values.shape[axis]
+    i0 = np.clip(np.floor(pos).astype(int), 0, n - 2)
+    t = pos - i0
+    a = np.take(values, i0, axis=axis)
+    b = np.take(values, i0 + 1, axis=axis)
+    shape = [1] * values.ndim
+    shape[axis] = -1
+    t = t.reshape(shape)
+    return a + (b - a) * t
+
+
+@lru_cache(maxsize=8)
+def _centre_normalized(params_bytes: bytes, width: int, height: int) -> np.ndarray:
+    """Normalised coordinates (H, W, 2) of every pixel centre, exact to 1e-9 px.
+
+    ``undistort_normalized`` on every pixel of a 640x576 image takes most of a second, so it
+    runs on a coarse grid; bilinear interpolation then starts a Newton polish on
+    ``camera.project`` with a frozen finite-difference Jacobian (one projection per step).
+    """
+    params = np.frombuffer(params_bytes, dtype=float)
+    step = 8
+    gx = np.unique(np.r_[np.arange(0, width, step), width - 1]).astype(float)
+    gy = np.unique(np.r_[np.arange(0, height, step), height - 1]).astype(float)
+    GX, GY = np.meshgrid(gx, gy)
+    coarse = cam.undistort_normalized(np.stack([GX.ravel(), GY.ravel()], 1), params)
+    coarse = coarse.reshape(gy.size, gx.size, 2)
+    u = np.arange(width, dtype=float)
+    v = np.arange(height, dtype=float)
+    xy = _interp_axis(_interp_axis(coarse, np.interp(u, gx, np.arange(gx.size)), 1),
+                      np.interp(v, gy, np.arange(gy.size)), 0).reshape(-1, 2)
+    U, V = np.meshgrid(u, v)
+    target = np.stack([U.ravel(), V.ravel()], 1)
+
+    def proj(p: np.ndarray) -> np.ndarray:
+        return cam.project(np.column_stack([p, np.ones(len(p))]), params).pixels
+
+    h = 1e-6
+    f0 = proj(xy)
+    jx = (proj(xy + [h, 0.0]) - f0) / h
+    jy = (proj(xy + [0.0, h]) - f0) / h
+    det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+    err = f0 - target
+    for _ in range(30):
+        if np.max(np.abs(err)) < 1e-9:
+            break
+        xy = xy - np.stack([(jy[:, 1] * err[:, 0] - jy[:, 0] * err[:, 1]) / det,
+                            (-jx[:, 1] * err[:, 0] + jx[:, 0] * err[:, 1]) / det], 1)
+        err = proj(xy) - target
+    else:
+        # Distortion too strong for the polish (a fold in the model): fall back to the exact,
+        # slow path rather than return rays that are off.
+        xy = cam.undistort_normalized(target, params)
+    out = xy.reshape(height, width, 2)
+    out.setflags(write=False)
+    return out
+
+
+def _plane(rvec: np.ndarray, tvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))
+    return R, np.asarray(tvec, dtype=float).reshape(3)
+
+
+def _intersect(x: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray):
+    """Ray (x, y, 1) / board plane: ray parameter s (= z of the hit), board-plane coordinates,
+    and |n . d| for the incidence angle. s is NaN where the ray misses the front half-space."""
+    n = R[:, 2]
+    nd = n[0] * x + n[1] * y + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = float(n @ t) / nd
+    s = np.where(np.isfinite(s) & (s > 0), s, np.nan)
+    r1t = float(R[:, 0] @ t)
+    r2t = float(R[:, 1] @ t)
+    bx = s * (R[0, 0] * x + R[1, 0] * y + R[2, 0]) - r1t
+    by = s * (R[0, 1] * x + R[1, 1] * y + R[2, 1]) - r2t
+    return s, bx, by, np.abs(nd)
+
+
+def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, *,
+           convention: str = "z", noise: Noise | None = None, rng: RngLike = None,
+           border: float = 1.0, background: float | None = 3.0, flying_pixels: bool = True,
+           supersample: int = 4, reflectivity: tuple[float, float, float] = (0.9, 0.1, 0.05),
+           gain: float = 0.6, dtype: type = np.uint16, invalid: float = np.nan) -> Frame:
+    """Render the board at pose (rvec, tvec) (board frame -> camera frame, metres).
+
+    ``border``: white margin around the squares, in squares. ``background``: distance (m) of a
+    frontal far wall, or None for no return (amplitude 0, depth invalid). ``reflectivity``:
+    (white, black, wall) albedo. ``gain``: fraction of full scale a white square at 1 m facing
+    the camera reaches (0.6 by default; about 0.05 mimics the Kinect's dark IR image, to
+    exercise tone mapping). ``dtype``: uint16, uint8 or a float type (fraction of full scale).
+    ``invalid``: the depth value of invalid pixels (NaN or 0). Depth is sampled at the pixel
+    centre; with ``flying_pixels`` a pixel straddling the board's outer edge reads the
+    coverage-weighted mean of the board and wall depths, like a real ToF mixed pixel.
+    """
+    conv = cam.check_convention(convention)
+    noise = Noise() if noise is None else noise
+    gen = _rng(rng)
+    S = int(supersample)
+    if S < 1:
+        raise CalibrationError(f"supersample must be at least 1, got {supersample}")
+    if not (np.isfinite(border) and border >= 0):
+        raise CalibrationError(f"border must be a non-negative number of squares, got {border}")
+    if background is not None and not (np.isfinite(background) and background > 0):
+        raise CalibrationError(f"background must be a positive distance or None, got {background}")
+    if not (np.isfinite(gain) and gain > 0):
+        raise CalibrationError(f"gain must be positive, got {gain}")
+    if not (np.isnan(invalid) or invalid == 0):
+        raise CalibrationError(f"invalid depth must be NaN or 0, got {invalid}")
+    refl_w, refl_b, refl_bg = (float(r) for r in reflectivity)
+    R, t = _plane(rvec, tvec)
+    W, H = camera.width, camera.height
+    sq = board.square
+    x_lo, x_hi = -sq * (1 + border), sq * (board.cols + border)
+    y_lo, y_hi = -sq * (1 + border), sq * (board.rows + border)
+    wall = np.inf if background is None else float(background)
+
+    def shade(x, y):
+        """Class (0 wall, 1 black, 2 white), ray parameter and amplitude
+        (albedo * cos(incidence) / r^2) of rays (x, y, 1)."""
+        s, bx, by, nd = _intersect(x, y, R, t)
+        hit = (bx >= x_lo) & (bx <= x_hi) & (by >= y_lo) & (by <= y_hi) & (s < wall)
+        squares = (bx >= -sq) & (bx < board.cols * sq) & (by >= -sq) & (by < board.rows * sq)
+        white = board.is_white(bx, by) | ~squares
+        cls = np.where(hit, np.where(white, 2, 1), 0).astype(np.int8)
+        d2 = x * x + y * y + 1.0
+        d3 = d2 * np.sqrt(d2)
+        with np.errstate(invalid="ignore"):
+            amp_board = np.where(white, refl_w, refl_b) * nd / (d3 * s * s)
+        amp_wall = 0.0 if background is None else refl_bg / (d3 * wall * wall)
+        return cls, s, np.where(hit, amp_board, amp_wall)
+
+    # Pixel centres: exact rays, for the depth and for pixels that one surface fills.
+    xy = _centre_normalized(camera.params.tobytes(), W, H)
+    xc, yc = xy[..., 0], xy[..., 1]
+    cls_c, s_c, amp = shade(xc, yc)
+    hit_c = cls_c > 0
+    cov = hit_c.astype(float)
+
+    # Anti-aliasing only where a pixel's corners and centre do not all see the same surface
+    # (square edges, the board outline): supersampling every pixel of a 640x576 image costs
+    # most of a second, and elsewhere the sub-samples would only average a smooth falloff.
+    # Sub-sample rays are bilinear between the pixel's corner rays, which are interpolated
+    # from the exact centre rays (error ~1e-4 px at the worst corner).
+    xy_k = _interp_axis(_interp_axis(xy, np.arange(W + 1) - 0.5, 1), np.arange(H + 1) - 0.5, 0)
+    cls_k, _, _ = shade(xy_k[..., 0], xy_k[..., 1])
+    c00, c01, c10, c11 = cls_k[:-1, :-1], cls_k[:-1, 1:], cls_k[1:, :-1], cls_k[1:, 1:]
+    mixed = (c00 != cls_c) | (c01 != cls_c) | (c10 != cls_c) | (c11 != cls_c)
+    # A board or square corner can poke into a pixel without reaching any of its corners; such a
+    # pixel always touches a mixed one, so the mixed set is grown by one pixel.
+    mixed = cv2.dilate(mixed.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    rows, cols = np.nonzero(mixed)
+    if rows.size and S > 1:
+        f = (np.arange(S) + 0.5) / S
+        fy, fx = f[None, :, None, None], f[None, None, :, None]
+        k00 = xy_k[rows, cols][:, None, None, :]
+        k01 = xy_k[rows, cols + 1][:, None, None, :]
+        k10 = xy_k[rows + 1, cols][:, None, None, :]
+        k11 = xy_k[rows + 1, cols + 1][:, None, None, :]
+        sub = ((1 - fy) * ((1 - fx) * k00 + fx * k01) + fy * ((1 - fx) * k10 + fx * k11))
+        cls_s, _, amp_s = shade(sub[..., 0], sub[..., 1])
+        amp[rows, cols] = amp_s.mean(axis=(1, 2))
+        cov[rows, cols] = (cls_s > 0).mean(axis=(1, 2))
+
+    # Depth at the pixel centre, in the frame's convention.
+    scale = 1.0 if conv == "z" else np.sqrt(xc * xc + yc * yc + 1.0)
+    board_depth = s_c * scale  # NaN where the ray misses the plane
+    if background is None:
+        depth_true = np.where(hit_c, board_depth, np.nan)
+    else:
+        wall_depth = wall * scale
+        depth_true = np.where(hit_c, board_depth, wall_depth)
+        if flying_pixels:
+            mixed = (cov > 0) & (cov < 1) & np.isfinite(board_depth)
+            depth_true = np.where(mixed, cov * board_depth + (1 - cov) * wall_depth, depth_true)
+    valid = np.isfinite(depth_true)
+
+    # Sensor errors. Draws happen in a fixed order so a seed always gives the same frame.
+    a_ref = refl_w  # a white square 1 m away, facing the camera
+    depth = depth_true + noise.offset
+    if noise.wiggle_amplitude > 0:
+        depth = depth + noise.wiggle_amplitude * np.sin(
+            2 * np.pi * depth_true / noise.wiggle_period + noise.wiggle_phase)
+    if noise.depth > 0 or noise.depth_const > 0:
+        sigma2 = noise.depth_const ** 2 + noise.depth ** 2 * a_ref / np.maximum(amp, 1e-9 * a_ref)
+        depth = depth + gen.standard_normal((H, W)) * np.sqrt(sigma2)
+    if noise.invalid_fraction > 0:
+        valid &= gen.random((H, W)) >= noise.invalid_fraction
+    depth = np.where(valid, depth, invalid).astype(np.float32)
+
+    level = gain * amp / a_ref
+    if noise.amplitude > 0:
+        level = level + gen.standard_normal((H, W)) * noise.amplitude
+    level = np.clip(level, 0.0, 1.0)
+    dt = np.dtype(dtype)
+    if dt.kind == "u":
+        top = np.iinfo(dt).max
+        amplitude = np.round(level * top).astype(dt)
+    elif dt.kind == "f":
+        amplitude = level.astype(dt)
+    else:
+        raise CalibrationError(f"amplitude dtype must be unsigned or float, got {dt}")
+
+    X, _ = cam.transform(rvec, tvec, board.object_points())
+    corners = cam.project(X, camera.params).pixels
+    corner_depth, _ = cam.depth_of(X, conv)
+    return Frame(amplitude=amplitude, depth=depth, corners=corners, corner_depth=corner_depth,
+                 rvec=np.asarray(rvec, dtype=float).reshape(3).copy(), tvec=t.copy(),
+                 K=camera.K, D=camera.D, convention=conv, depth_true=depth_true,
+                 coverage=cov.astype(np.float32))
+
+
+def _board_outline(board: Board, border: float, per_edge: int = 16) -> np.ndarray:
+    """Points along the outline of the board ``border`` squares beyond the interior corners
+    (edges are sampled because distortion bends them)."""
+    sq = board.square
+    x0, x1 = -border * sq, (board.cols - 1 + border) * sq
+    y0, y1 = -border * sq, (board.rows - 1 + border) * sq
+    s = np.linspace(0.0, 1.0, per_edge, endpoint=False)
+    xs = np.r_[x0 + (x1 - x0) * s, np.full_like(s, x1), x1 - (x1 - x0) * s, np.full_like(s, x0)]
+    ys = np.r_[np.full_like(s, y0), y0 + (y1 - y0) * s, np.full_like(s, y1), y1 - (y1 - y0) * s]
+    return np.column_stack([xs, ys, np.zeros_like(xs)])
+
+
+def in_view(camera: SimCamera, points: np.ndarray, margin_px: float = 0.0) -> bool:
+    """True when all camera-frame points are in front of the camera and project at least
+    ``margin_px`` inside the image. Points beyond the field of view are rejected even when the
+    distortion polynomial folds them back into the image."""
+    P = np.asarray(points, dtype=float)
+    if np.any(P[:, 2] <= 0):
+        return False
+    W, H = camera.width, camera.height
+    edge = np.array([[0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1], [(W - 1) / 2, 0],
+                     [(W - 1) / 2, H - 1], [0, (H - 1) / 2], [W - 1, (H - 1) / 2]])
+    r_max = np.max(np.linalg.norm(cam.undistort_normalized(edge, camera.params), axis=1))
+    if np.any(np.hypot(P[:, 0] / P[:, 2], P[:, 1] / P[:, 2]) > r_max):
+        return False
+    pix = cam.project(P, camera.params).pixels
+    return bool(np.all((pix[:, 0] >= margin_px) & (pix[:, 0] <= W - 1 - margin_px)
+                       & (pix[:, 1] >= margin_px) & (pix[:, 1] <= H - 1 - margin_px)))
+
+
+def random_poses(camera: SimCamera, board: Board, n: int, rng: RngLike = None, *,
+                 distance: tuple[float, float] = (0.5, 1.5), max_tilt_deg: float = 40.0,
+                 max_roll_deg: float = 10.0, margin_px: float = 5.0, view_border: float = 1.0,
+                 max_tries: int = 2000) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``n`` random board poses (rvec, tvec) with the whole pattern in view.
+
+    The board centre lies at a uniformly drawn pixel, its z uniform in ``distance`` (m); the
+    tilt (angle between board normal and optical axis) is uniform in [0, ``max_tilt_deg``] about
+    a random in-plane axis, and the in-plane rotation is uniform within +-``max_roll_deg``.
+    Poses are kept only when the board outline ``view_border`` squares beyond the interior
+    corners (1: the outer squares' edges) is ``margin_px`` inside the image; ``max_tries``
+    rejections per pose are allowed before the request is declared impossible.
+    """
+    gen = _rng(rng)
+    lo, hi = (float(d) for d in distance)
+    if not (0 < lo <= hi):
+        raise CalibrationError(f"distance range must be positive and ordered, got {distance}")
+    if not (0 <= max_tilt_deg < 90):
+        raise CalibrationError(f"max tilt must be in [0, 90) degrees, got {max_tilt_deg}")
+    outline = _board_outline(board, view_border)
+    centre = np.array([(board.cols - 1) / 2 * board.square, (board.rows - 1) / 2 * board.square, 0])
+    W, H = camera.width, camera.height
+    poses: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(int(n)):
+        for _ in range(max_tries):
+            tilt = np.radians(gen.uniform(0.0, max_tilt_deg))
+            phi = gen.uniform(0.0, 2 * np.pi)
+            roll = np.radians(gen.uniform(-max_roll_deg, max_roll_deg))
+            Rt, _ = cv2.Rodrigues(np.array([np.cos(phi), np.sin(phi), 0.0]) * tilt)
+            Rr, _ = cv2.Rodrigues(np.array([0.0, 0.0, roll]))
+            R = Rt @ Rr
+            target = np.array([[gen.uniform(0, W - 1), gen.uniform(0, H - 1)]])
+            z = gen.uniform(lo, hi)
+            tvec = cam.rays(target, camera.params)[0] * z - R @ centre
+            rvec = cv2.Rodrigues(R)[0].ravel()
+            if in_view(camera, outline @ R.T + tvec, margin_px):
+                poses.append((rvec, tvec))
+                break
+        else:
+            raise CalibrationError(
+                f"no pose with the whole board in view after {max_tries} tries: the board is too "
+                f"large for distances {distance} or the tilt/margin too demanding")
+    return poses
