@@ -101,14 +101,17 @@ def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float =
     D = np.asarray(params[4:9], dtype=float)
     target = np.stack([(pix[:, 0] - cx) / fx, (pix[:, 1] - cy) / fy], axis=1)
     xy = target.copy()
+    if not np.any(D):
+        return xy
     scale = np.array([fx, fy])
     for _ in range(max_iter):
         xd, yd, dxy, _ = _distort(xy[:, 0], xy[:, 1], D, True)
         err = np.stack([xd, yd], axis=1) - target
         if np.all(np.abs(err * scale) < tol_px):
             break
-        step = np.linalg.solve(dxy, err[..., None])[..., 0]
-        xy = xy - step
+        a, b, c, d = dxy[:, 0, 0], dxy[:, 0, 1], dxy[:, 1, 0], dxy[:, 1, 1]
+        det = a * d - b * c
+        xy = xy - np.stack([d * err[:, 0] - b * err[:, 1], a * err[:, 1] - c * err[:, 0]], axis=1) / det[:, None]
     return xy
 
 

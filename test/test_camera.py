@@ -1,0 +1,73 @@
+"""The plumb_bob model against OpenCV and finite differences."""
+import cv2
+import numpy as np
+import pytest
+
+from tof_calib_ros.core.camera import (depth_of, points_from_depth, project, rays, split_intrinsics, transform,
+                                       undistort_normalized)
+
+PARAMS = np.array([284.4, 280.1, 101.0, 98.0, -0.3, 0.12, 0.001, -0.002, -0.02])
+
+
+@pytest.fixture
+def points():
+    rng = np.random.default_rng(0)
+    return np.column_stack([rng.uniform(-0.3, 0.3, (60, 2)), rng.uniform(0.5, 2.0, 60)])
+
+
+def test_projection_matches_opencv(points):
+    K, D = split_intrinsics(PARAMS)
+    ref, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), K, D)
+    np.testing.assert_allclose(project(points, PARAMS).pixels, ref[:, 0], atol=1e-9)
+
+
+def test_projection_jacobians_match_finite_differences(points):
+    pr = project(points, PARAMS, jac=True)
+    analytic = np.concatenate([pr.d_k, pr.d_dist], axis=2)
+    for i in range(9):
+        h = 1e-5 * max(abs(PARAMS[i]), 1.0)
+        up, dn = PARAMS.copy(), PARAMS.copy()
+        up[i] += h
+        dn[i] -= h
+        fd = (project(points, up).pixels - project(points, dn).pixels) / (2 * h)
+        np.testing.assert_allclose(analytic[:, :, i], fd, rtol=1e-6, atol=1e-6)
+    for i in range(3):
+        up, dn = points.copy(), points.copy()
+        up[:, i] += 1e-7
+        dn[:, i] -= 1e-7
+        fd = (project(up, PARAMS).pixels - project(dn, PARAMS).pixels) / 2e-7
+        np.testing.assert_allclose(pr.d_point[:, :, i], fd, rtol=1e-5, atol=1e-4)
+
+
+def test_undistortion_inverts_projection_to_1e9_px(points):
+    pix = project(points, PARAMS).pixels
+    xy = undistort_normalized(pix, PARAMS)
+    back = project(np.column_stack([xy, np.ones(len(xy))]), PARAMS).pixels
+    assert np.abs(back - pix).max() < 1e-9
+    np.testing.assert_allclose(xy, points[:, :2] / points[:, 2:], atol=1e-12)
+
+
+@pytest.mark.parametrize("convention", ["z", "radial"])
+def test_depth_conventions_and_gradient(points, convention):
+    d, grad = depth_of(points, convention)
+    expected = points[:, 2] if convention == "z" else np.linalg.norm(points, axis=1)
+    np.testing.assert_allclose(d, expected)
+    for i in range(3):
+        up = points.copy()
+        up[:, i] += 1e-7
+        np.testing.assert_allclose((depth_of(up, convention)[0] - d) / 1e-7, grad[:, i], atol=1e-6)
+    back = points_from_depth(rays(project(points, PARAMS).pixels, PARAMS), d, convention)
+    np.testing.assert_allclose(back, points, atol=1e-10)
+
+
+def test_pose_jacobian_matches_finite_differences():
+    rng = np.random.default_rng(1)
+    board = np.column_stack([rng.uniform(0, 0.3, (20, 2)), np.zeros(20)])
+    pose = np.array([0.1, -0.2, 0.3, 0.1, 0.2, 1.0])
+    X, J = transform(pose[:3], pose[3:], board, jac=True)
+    for i in range(6):
+        up, dn = pose.copy(), pose.copy()
+        up[i] += 1e-7
+        dn[i] -= 1e-7
+        fd = (transform(up[:3], up[3:], board)[0] - transform(dn[:3], dn[3:], board)[0]) / 2e-7
+        np.testing.assert_allclose(J[:, :, i], fd, atol=1e-7)

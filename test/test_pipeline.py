@@ -1,0 +1,99 @@
+"""The whole depth-aided calibration against the renderer's ground truth, and its refusals."""
+import numpy as np
+import pytest
+
+from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
+from tof_calib_ros.core.traditional import calibrate_opencv
+
+BOARD = Board(8, 6, 0.04)
+CAM = sim.pmd_camera()
+
+
+def _scene(n, seed, convention="z", noise=None, tilt=35.0, exact=False, distance=(0.55, 0.9)):
+    rng = np.random.default_rng(seed)
+    poses = sim.random_poses(CAM, BOARD, n, rng, distance=distance, max_tilt_deg=tilt)
+    frames = [sim.render(CAM, BOARD, r, t, convention=convention, noise=noise, rng=rng) for r, t in poses]
+    views = [View(f.depth_true if exact else f.depth, f.corners) for f in frames]
+    return views, frames
+
+
+@pytest.mark.parametrize("convention", ["z", "radial"])
+def test_noiseless_views_recover_the_truth(convention):
+    views, frames = _scene(6, 1, convention, noise=sim.Noise(offset=0.025), exact=True)
+    for v, f in zip(views, frames):
+        v.depth = f.depth_true + 0.025
+    res = calibrate(views, BOARD, depth_convention=convention, distortion="plumb_bob")
+    truth = CAM.params
+    got = np.r_[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]]
+    np.testing.assert_allclose(got, truth[:4], rtol=1e-6)
+    np.testing.assert_allclose(res.D[:4], truth[4:8], atol=1e-6)
+    assert res.depth_offset == pytest.approx(0.025, abs=1e-7)
+    assert len(res.views) == len(frames)
+    for v in res.views:
+        np.testing.assert_allclose(v.tvec, frames[v.index].tvec, atol=1e-7)
+    assert res.ok, res.verdict
+
+
+def test_four_corners_three_images_where_opencv_refuses():
+    # Four corners cannot tell lens distortion from focal length, so the camera has none here.
+    cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)
+    rng = np.random.default_rng(2)
+    ids = np.array([0, BOARD.cols - 1, BOARD.n_corners - BOARD.cols, BOARD.n_corners - 1])
+    poses = sim.random_poses(cam, BOARD, 3, rng, distance=(0.55, 0.9), max_tilt_deg=5)
+    frames = [sim.render(cam, BOARD, r, t, noise=sim.Noise(depth_const=0.01), rng=rng) for r, t in poses]
+    views = [View(f.depth, f.corners[ids] + rng.normal(0, 0.01, (4, 2)), ids) for f in frames]
+    with pytest.raises(CalibrationError, match="OpenCV"):
+        calibrate_opencv([BOARD.object_points(ids)] * 3, [v.corners for v in views], (200, 200))
+    res = calibrate(views, BOARD, depth_bias="none")
+    assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.005)
+    assert any("OpenCV" in n for n in res.notes)
+
+
+def test_noisy_tof_views_beat_traditional_calibration():
+    noise = sim.Noise(depth=0.004, offset=0.02)
+    views, _ = _scene(5, 3, noise=noise, tilt=10)
+    rng = np.random.default_rng(3)
+    for v in views:
+        v.corners = v.corners + rng.normal(0, 0.05, v.corners.shape)
+    ours = calibrate(views, BOARD)
+    trad = calibrate(views, BOARD, method="traditional")
+    f_err = abs(ours.K[0, 0] / CAM.params[0] - 1)
+    assert f_err < 0.5 * abs(trad.K[0, 0] / CAM.params[0] - 1)
+    assert f_err < 3 * ours.std["fx"] / CAM.params[0] + 1e-4  # the reported uncertainty is honest
+    assert ours.depth_offset == pytest.approx(0.02, abs=0.003)
+
+
+def test_end_to_end_from_rendered_amplitude_images():
+    views, frames = _scene(6, 4, noise=sim.Noise(depth=0.003, amplitude=0.002))
+    for v, f in zip(views, frames):
+        v.corners, v.amplitude = None, f.amplitude
+    res = calibrate(views, BOARD, distortion="plumb_bob")
+    assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
+    assert res.pixel_rms < 0.2
+    assert len(res.views) == 6
+
+
+def test_clear_errors_for_bad_input():
+    views, frames = _scene(3, 5)
+    blank = np.zeros((200, 200), np.uint16)
+    with pytest.raises(CalibrationError, match="no board found in any of the 3 views"):
+        calibrate([View(f.depth, amplitude=blank) for f in frames], BOARD)
+    with pytest.raises(CalibrationError, match="too few usable views"):
+        calibrate(views[:2], BOARD)
+    with pytest.raises(CalibrationError, match="image size"):
+        calibrate([views[0], View(np.zeros((100, 120), np.float32), views[1].corners), views[2]], BOARD)
+    with pytest.raises(CalibrationError, match="valid depth|too few usable"):
+        calibrate([View(np.full_like(v.depth, np.nan), v.corners) for v in views], BOARD)
+    with pytest.raises(CalibrationError, match="convention"):
+        calibrate(views, BOARD, depth_convention="disparity")
+    with pytest.raises(CalibrationError, match="2x2"):
+        Board(1, 5, 0.03)
+
+
+def test_parallel_views_are_refused():
+    rng = np.random.default_rng(6)
+    (r, t), = sim.random_poses(CAM, BOARD, 1, rng, distance=(0.6, 0.7), max_tilt_deg=20)
+    frames = [sim.render(CAM, BOARD, r, t + np.array([dx, 0, dz]), rng=rng)
+              for dx, dz in ((0, 0), (0.03, 0.1), (-0.03, 0.2))]
+    with pytest.raises(CalibrationError, match="same orientation"):
+        calibrate([View(f.depth, f.corners) for f in frames], BOARD)

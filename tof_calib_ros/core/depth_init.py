@@ -1,0 +1,85 @@
+"""Initial intrinsics and poses from the depth data (the paper's 'updating K').
+
+Given each corner's denoised depth, a guess of K places the corners in 3D; the right K is the
+one for which the board's squares come out at their true size. Unlike Zhang's method this
+needs no tilt between views, so it also works where OpenCV refuses or diverges.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from .camera import points_from_depth, rays
+from .errors import CalibrationError
+
+
+def neighbour_pairs(object_points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs of a view's corners that are near each other on the board, and their true distance."""
+    diff = object_points[:, None, :] - object_points[None, :, :]
+    dist = np.linalg.norm(diff, axis=2)
+    i, j = np.triu_indices(len(object_points), 1)
+    d = dist[i, j]
+    near = d <= 1.5 * d.min() + 1e-12
+    return i[near], j[near], d[near]
+
+
+def focal_guess(pixels: list[np.ndarray], depth: list[np.ndarray], object_points: list[np.ndarray],
+                image_size: tuple[int, int]) -> np.ndarray:
+    """Pinhole intrinsics from similar triangles (f = pixel length x depth / metric length),
+    with the principal point at the image centre: a start that needs no tilt and no OpenCV."""
+    ratios = []
+    for x, d, o in zip(pixels, depth, object_points):
+        i, j, L = neighbour_pairs(o)
+        dd = 0.5 * (d[i] + d[j])
+        ok = np.isfinite(dd)
+        ratios.append(np.linalg.norm(x[i] - x[j], axis=1)[ok] * dd[ok] / L[ok])
+    ratios = np.concatenate(ratios)
+    if not ratios.size:
+        raise CalibrationError("no valid depth at any corner of any view (0 or NaN everywhere)")
+    f = float(np.median(ratios))
+    w, h = image_size
+    return np.array([f, f, (w - 1) / 2, (h - 1) / 2, 0, 0, 0, 0, 0], dtype=float)
+
+
+def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels, depth, object_points, pairs,
+                          convention: str, estimate_offset: bool) -> np.ndarray:
+    intr = base.copy()
+    intr[:4] = k[:4]
+    offset = k[4] if estimate_offset else 0.0
+    out = []
+    for x, d, (i, j, L) in zip(pixels, depth, pairs):
+        X = points_from_depth(rays(x, intr), d - offset, convention)
+        out.append((np.linalg.norm(X[i] - X[j], axis=1) - L) / L)
+    res = np.concatenate(out)
+    if estimate_offset:
+        res = np.r_[res, offset / 0.1 * 1e-3]  # a weak prior, as in the bundle
+    return res[np.isfinite(res)]
+
+
+def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: list[np.ndarray],
+                      object_points: list[np.ndarray], convention: str,
+                      estimate_offset: bool) -> tuple[np.ndarray, float, float]:
+    """fx, fy, cx, cy (and a depth offset) that make every square its true size, distortion held.
+
+    Returns the intrinsics, the depth offset, and the RMS relative square-size error."""
+    pairs = [neighbour_pairs(o) for o in object_points]
+    k0 = np.r_[intrinsics[:4], 0.0] if estimate_offset else intrinsics[:4].copy()
+    sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac",
+                        args=(intrinsics, pixels, depth, object_points, pairs, convention, estimate_offset))
+    out = intrinsics.copy()
+    out[:4] = sol.x[:4]
+    offset = float(sol.x[4]) if estimate_offset else 0.0
+    return out, offset, float(np.sqrt(np.mean(sol.fun ** 2)))
+
+
+def pose_from_points(object_points: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Rigid board-to-camera pose (rvec, tvec) from corresponding 3D points (Kabsch)."""
+    ok = np.all(np.isfinite(points), axis=1)
+    a, b = object_points[ok], points[ok]
+    ca, cb = a.mean(0), b.mean(0)
+    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
+    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ S @ U.T
+    t = cb - R @ ca
+    return np.r_[cv2.Rodrigues(R)[0].ravel(), t]

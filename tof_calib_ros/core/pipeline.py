@@ -1,0 +1,312 @@
+"""The depth-aided calibration (the paper's Algorithm 1), and the traditional baseline.
+
+1. traditional calibration (OpenCV) as a first guess; a guess from the depth alone where
+   OpenCV refuses or diverges;
+2. planarize each view's depth at its corners;
+3. update K (and the depth offset) until the squares have their true size in 3D,
+   re-planarizing with each new K;
+4. re-initialise the poses from the 3D corners and update the distortion;
+5. the joint LM over pixel and depth residuals, each view weighted by its own variances,
+   with the depth bias estimated alongside (beyond the paper: real ToF depth is offset).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from . import bundle
+from .board import Board
+from .camera import check_convention, points_from_depth, rays, split_intrinsics
+from .depth_init import focal_guess, pose_from_points, update_intrinsics
+from .detection import Detection, detect
+from .errors import CalibrationError
+from .planarize import DepthSamples, Plane, board_samples, corner_depth, fit_samples, sample_depth
+from .result import INTRINSIC_NAMES, CalibrationResult, ViewReport
+from .traditional import Traditional, calibrate_opencv
+
+DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
+                    "full": [4, 5, 6, 7, 8]}
+DEPTH_BIAS_TERMS = {"none": [], "offset": [9], "offset+scale": [9, 10]}
+MIN_PARALLEL_SPREAD_DEG = 0.5
+NO_BOARD = "no board found"
+MAX_OUTER_ROUNDS = 6
+
+
+@dataclass
+class View:
+    """One frame: the depth image plus either the amplitude image or already-detected corners.
+
+    ``depth`` is in metres when float, in millimetres when integer (see ``depth_units``);
+    0 and NaN are invalid. ``ids`` are the board indices of ``corners`` (default: all, in order).
+    """
+
+    depth: np.ndarray
+    corners: np.ndarray | None = None
+    ids: np.ndarray | None = None
+    amplitude: np.ndarray | None = None
+
+
+@dataclass
+class _Prepared:
+    index: int
+    depth: np.ndarray          # metres, NaN invalid
+    corners: np.ndarray
+    ids: np.ndarray
+    amplitude: np.ndarray | None
+
+
+def depth_in_metres(depth: np.ndarray, units: float | None = None) -> np.ndarray:
+    """Float metres with NaN for invalid pixels; integer images are millimetres unless told."""
+    d = np.asarray(depth)
+    scale = units if units is not None else (1e-3 if np.issubdtype(d.dtype, np.integer) else 1.0)
+    out = d.astype(np.float64) * scale
+    out[~np.isfinite(out) | (out <= 0)] = np.nan
+    return out
+
+
+def _prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | None,
+             depth_units: float | None) -> tuple[list[_Prepared], dict[int, str], tuple[int, int]]:
+    if len(views) == 0:
+        raise CalibrationError("no views given")
+    if image_size is None:
+        shape = np.asarray(views[0].depth).shape
+        if len(shape) != 2:
+            raise CalibrationError(f"view 0: depth must be a 2-D image, got shape {shape}")
+        image_size = (shape[1], shape[0])
+    w, h = image_size
+    kept, rejected = [], {}
+    for i, v in enumerate(views):
+        depth = np.asarray(v.depth)
+        if depth.shape != (h, w):
+            raise CalibrationError(f"view {i}: depth image is {depth.shape[1] if depth.ndim == 2 else '?'}x"
+                                   f"{depth.shape[0]} but the image size is {w}x{h}")
+        if v.amplitude is not None and np.asarray(v.amplitude).shape[:2] != (h, w):
+            raise CalibrationError(f"view {i}: amplitude image size {np.asarray(v.amplitude).shape[:2][::-1]} "
+                                   f"differs from the depth image size {(w, h)}")
+        corners, ids = v.corners, v.ids
+        if corners is None:
+            if v.amplitude is None:
+                raise CalibrationError(f"view {i}: give either the amplitude image or the corners")
+            try:
+                found = detect(np.asarray(v.amplitude), board)
+            except CalibrationError as exc:
+                found = Detection(None, str(exc))
+            if found.corners is None:
+                rejected[i] = f"{NO_BOARD}: {found.message}"
+                continue
+            corners = found.corners
+        corners = np.asarray(corners, dtype=float).reshape(-1, 2)
+        if ids is None:
+            if len(corners) != board.n_corners:
+                raise CalibrationError(f"view {i}: {len(corners)} corners for a {board.cols}x{board.rows} "
+                                       "board; pass ids for a partial set")
+            ids = np.arange(board.n_corners)
+        ids = np.asarray(ids, dtype=int).ravel()
+        if len(ids) != len(corners) or len(np.unique(ids)) != len(ids) or ids.min() < 0 \
+                or ids.max() >= board.n_corners:
+            raise CalibrationError(f"view {i}: corner ids must be distinct board indices, one per corner")
+        if not np.all(np.isfinite(corners)):
+            raise CalibrationError(f"view {i}: corners contain NaN or inf")
+        if len(corners) < 4:
+            rejected[i] = f"only {len(corners)} corners (need 4)"
+            continue
+        kept.append(_Prepared(i, depth_in_metres(depth, depth_units), corners, ids,
+                              None if v.amplitude is None else np.asarray(v.amplitude)))
+    return kept, rejected, (int(w), int(h))
+
+
+def _require(views: list[_Prepared], rejected: dict[int, str], min_views: int, n_given: int) -> None:
+    if len(views) >= min_views:
+        return
+    why = "; ".join(f"view {k}: {r}" for k, r in sorted(rejected.items()))
+    if not views and rejected and all(r.startswith(NO_BOARD) for r in rejected.values()):
+        raise CalibrationError(f"no board found in any of the {n_given} views")
+    raise CalibrationError(f"too few usable views: {len(views)} of {n_given}, need at least {min_views}"
+                           + (f" ({why})" if why else ""))
+
+
+def _distortion_terms(distortion: str, views: list[_Prepared]) -> list[int]:
+    if distortion != "auto":
+        if distortion not in DISTORTION_TERMS:
+            raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
+                                   f"got {distortion!r}")
+        return DISTORTION_TERMS[distortion]
+    per_view = np.median([len(v.corners) for v in views])
+    total = sum(len(v.corners) for v in views)
+    if per_view < 9:
+        return DISTORTION_TERMS["none"]
+    if total < 60:
+        return DISTORTION_TERMS["k1"]
+    if total < 150:
+        return DISTORTION_TERMS["k1k2"]
+    return DISTORTION_TERMS["plumb_bob"]
+
+
+def _planarize_all(views: list[_Prepared], samples: list[DepthSamples], intr: np.ndarray, bias: np.ndarray,
+                   convention: str) -> tuple[list[np.ndarray], list[float], list[Plane]]:
+    """Corner depths in the measured domain (the plane is fitted to bias-corrected depth),
+    each view's depth error floor, and the planes."""
+    offset, scale = bias
+    depths, floors, planes = [], [], []
+    for v, smp in zip(views, samples):
+        corrected = DepthSamples(smp.pixels, (smp.depth - offset) / (1 + scale))
+        plane = fit_samples(corrected, intr, convention, ransac=False)
+        d, se = corner_depth(plane, v.corners, intr, convention)
+        depths.append((1 + scale) * d + offset)
+        # The corners' depths share one plane (3 degrees of freedom): their joint weight is
+        # that of three independent measurements, not of one per corner.
+        floors.append(float(np.median(se) * (1 + scale) * np.sqrt(len(d) / 3.0)))
+        planes.append(plane)
+    return depths, floors, planes
+
+
+def _check_not_parallel(planes: list[Plane]) -> None:
+    normals = np.array([p.normal for p in planes])
+    mean = normals.mean(0)
+    mean /= np.linalg.norm(mean)
+    spread = np.degrees(np.arccos(np.clip(normals @ mean, -1, 1))).max()
+    if len(planes) > 1 and spread < MIN_PARALLEL_SPREAD_DEG:
+        raise CalibrationError(f"all {len(planes)} views show the board at the same orientation "
+                               f"(within {spread:.2f} deg): tilt the board differently between views")
+
+
+def _k_update(views, samples, board, intr, bias, convention, estimate_offset, max_iter=10):
+    """The paper's lines 4-9: update K, re-planarize, until K settles."""
+    err = np.inf
+    for _ in range(max_iter):
+        depths, _, _ = _planarize_all(views, samples, intr, bias, convention)
+        new, offset, err = update_intrinsics(intr, [v.corners for v in views], depths,
+                                             [board.object_points(v.ids) for v in views], convention,
+                                             estimate_offset)
+        settled = abs(new[0] - intr[0]) < 1e-7 * intr[0] and abs(offset - bias[0]) < 1e-7
+        intr, bias = new, np.array([offset, bias[1]])
+        if settled:
+            break
+    return intr, bias, err
+
+
+def _report(views: list[_Prepared], fit: bundle.Fit, planes: list[Plane] | None) -> list[ViewReport]:
+    out = []
+    for j, v in enumerate(views):
+        pix, dep = fit.pixel_residuals[j], fit.depth_residuals[j]
+        fin = dep[np.isfinite(dep)]
+        out.append(ViewReport(
+            v.index, fit.state.poses[j, :3].copy(), fit.state.poses[j, 3:].copy(),
+            float(np.sqrt(np.mean(np.sum(pix ** 2, axis=1)))),
+            float(np.sqrt(np.mean(fin ** 2))) if fin.size else float("nan"), pix, dep,
+            planes[j].sigma if planes else float("nan"), len(planes[j].pixels) if planes else 0))
+    return out
+
+
+def _std(fit: bundle.Fit) -> dict[str, float]:
+    names = list(INTRINSIC_NAMES) + ["depth_offset", "depth_scale"]
+    std = {n: 0.0 for n in names}
+    for k, i in enumerate(fit.free_global):
+        std[names[i]] = float(np.sqrt(max(fit.covariance[k, k], 0.0)))
+    return std
+
+
+def _result(method, image_size, convention, fit, views, planes, rejected, notes) -> CalibrationResult:
+    K, D = split_intrinsics(fit.state.intrinsics)
+    return CalibrationResult(method, image_size, convention, K, D, float(fit.state.bias[0]),
+                             float(fit.state.bias[1]), _std(fit), _report(views, fit, planes), rejected, notes)
+
+
+def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
+              depth_convention: str = "z", method: str = "depth", *, depth_units: float | None = None,
+              depth_bias: str = "offset", distortion: str = "auto", loss: str | None = None,
+              min_views: int = 3, progress: Callable[[str], None] | None = None) -> CalibrationResult:
+    """Calibrate a ToF camera from checkerboard views.
+
+    ``image_size`` is (width, height), taken from the depth images when not given.
+    ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline);
+    ``'depth'`` is the depth-aided method. Raises CalibrationError with the reason when the
+    views cannot be calibrated; check ``result.verdict`` before trusting a result.
+    """
+    say = progress or (lambda _msg: None)
+    convention = check_convention(depth_convention)
+    if method not in ("depth", "traditional"):
+        raise CalibrationError(f"method must be 'depth' or 'traditional', got {method!r}")
+    if depth_bias not in DEPTH_BIAS_TERMS:
+        raise CalibrationError(f"depth_bias must be one of {sorted(DEPTH_BIAS_TERMS)}, got {depth_bias!r}")
+    if loss not in (None, "huber"):
+        raise CalibrationError(f"loss must be None or 'huber', got {loss!r}")
+    prepared, rejected, image_size = _prepare(views, board, image_size, depth_units)
+    say(f"{len(prepared)} of {len(views)} views have a board")
+    _require(prepared, rejected, min_views, len(views))
+    obj = [board.object_points(v.ids) for v in prepared]
+    notes: list[str] = []
+    trad: Traditional | None = None
+    try:
+        trad = calibrate_opencv(obj, [v.corners for v in prepared], image_size)
+        say(f"traditional calibration: fx={trad.intrinsics[0]:.2f} fy={trad.intrinsics[1]:.2f}, "
+            f"RMS {trad.rms:.3f} px")
+    except CalibrationError as exc:
+        if method == "traditional":
+            raise
+        notes.append(f"{exc}; initialised from the depth data instead")
+        say(notes[-1])
+
+    if method == "traditional":
+        state = bundle.State(trad.intrinsics.copy(), np.zeros(2), trad.poses.copy())
+        nodepth = [bundle.Observations(o, v.corners, np.full(len(o), np.nan)) for o, v in zip(obj, prepared)]
+        fit = bundle.solve(nodepth, state, convention, [0, 1, 2, 3, 4, 5, 6, 7], rounds=1, max_iter=0)
+        return _result(method, image_size, convention, fit, prepared, None, rejected, notes)
+
+    # Choose each view's plane samples once (white squares, valid depth, RANSAC inliers);
+    # views whose depth is unusable are dropped with the reason.
+    guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
+                        obj, image_size)
+    first = trad.intrinsics if trad is not None else guess
+    usable, samples = [], []
+    for v in prepared:
+        try:
+            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude)
+            plane = fit_samples(smp, first, convention, ransac=True)
+            samples.append(DepthSamples(smp.pixels[plane.inliers], smp.depth[plane.inliers]))
+            usable.append(v)
+        except CalibrationError as exc:
+            rejected[v.index] = str(exc)
+    keep = [prepared.index(v) for v in usable]
+    prepared = usable
+    _require(prepared, rejected, min_views, len(views))
+    obj = [obj[k] for k in keep]
+    guesses = [guess] if trad is None or len(keep) != len(trad.poses) else [trad.intrinsics, guess]
+    estimate_offset = 9 in DEPTH_BIAS_TERMS[depth_bias]
+    best = None
+    for g in guesses:
+        intr, bias, err = _k_update(prepared, samples, board, g.copy(), np.zeros(2), convention, estimate_offset)
+        if best is None or err < best[2]:
+            best = (intr, bias, err)
+    intr, bias, err = best
+    say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
+
+    depths, floors, planes = _planarize_all(prepared, samples, intr, bias, convention)
+    _check_not_parallel(planes)
+    poses = np.array([pose_from_points(o, points_from_depth(rays(v.corners, intr), (d - bias[0]) / (1 + bias[1]),
+                                                           convention))
+                      for o, v, d in zip(obj, prepared, depths)])
+    state = bundle.State(intr, bias, poses)
+    dist = _distortion_terms(distortion, prepared)
+    bias_terms = DEPTH_BIAS_TERMS[depth_bias]
+    # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
+    # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
+    observations = [bundle.Observations(o, v.corners, d, f) for o, v, d, f in zip(obj, prepared, depths, floors)]
+    state = bundle.solve(observations, state, convention, [], rounds=1).state
+    if dist:
+        state = bundle.solve(observations, state, convention, dist, rounds=1).state
+    for _ in range(MAX_OUTER_ROUNDS):
+        before = np.r_[state.intrinsics, state.bias]
+        fit = bundle.solve(observations, state, convention, [0, 1, 2, 3] + dist + bias_terms, loss=loss)
+        state = fit.state
+        say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
+            f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
+        depths, floors, planes = _planarize_all(prepared, samples, state.intrinsics, state.bias, convention)
+        observations = [bundle.Observations(o, v.corners, d, f)
+                        for o, v, d, f in zip(obj, prepared, depths, floors)]
+        change = np.abs(np.r_[state.intrinsics, state.bias] - before)
+        if change[0] < 1e-9 * state.intrinsics[0] and change[9] < 1e-9:
+            break
+    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes)

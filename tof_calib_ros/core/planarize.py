@@ -1,0 +1,228 @@
+"""Depth planarization: the paper's denoising of the depth at each corner.
+
+The white squares' depth is less noisy than the black squares' (more returned light), and
+the board is a plane. So: segment the white squares from the detected corners (the outer
+ones too, through the board homography), keep their inner part, drop invalid pixels and
+pixels on a steep depth gradient (flying pixels), back-project them, fit the plane by
+RANSAC + SVD, and read each corner's depth where its viewing ray meets that plane.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .board import Board
+from .camera import points_from_depth, rays, undistort_normalized
+from .errors import CalibrationError
+
+MIN_PLANE_PIXELS = 30
+
+
+@dataclass
+class Plane:
+    """A fitted board plane and the pixels it came from.
+
+    The plane is ``coef . X = 1``: along a ray ``u`` (z = 1 for z-depth, unit length for
+    radial depth) its depth is ``1 / (coef . u)``, linear in the coefficients, which is what
+    makes a fit to depth residuals well posed."""
+
+    coef: np.ndarray
+    covariance: np.ndarray  # 3x3, of coef
+    sigma: float            # std of the inliers' depth about the plane, metres
+    pixels: np.ndarray      # (M, 2) integer pixel coordinates (x, y) of the inliers
+    inliers: np.ndarray     # (n_candidates,) bool
+    n_candidates: int       # white-square pixels with valid depth before RANSAC
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal, facing the camera."""
+        return -self.coef / np.linalg.norm(self.coef)
+
+
+def white_square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, board: Board,
+                        params: np.ndarray, margin: float, amplitude: np.ndarray | None) -> np.ndarray:
+    """(M, 2) pixel coordinates (x, y) inside the white squares, ``margin`` squares off their edges.
+
+    The board-to-image map is a homography on undistorted coordinates, so lens distortion is
+    honoured. When the amplitude image is given, the brighter of the two square colourings is
+    taken as white, which also covers boards whose colours are swapped by a 180 degree turn.
+    """
+    obj = board.object_points(ids)[:, :2]
+    norm = undistort_normalized(corners, params)
+    if len(obj) < 4:
+        raise CalibrationError("planarization needs at least 4 corners in a view")
+    H, _ = cv2.findHomography(obj, norm, 0)
+    if H is None:
+        raise CalibrationError("the corners of a view do not form a valid board (degenerate homography)")
+    h, w = shape
+    s = board.square
+    outline = np.array([[-s, -s], [board.cols * s, -s], [board.cols * s, board.rows * s],
+                        [-s, board.rows * s]])
+    fx, fy, cx, cy = params[:4]
+    on = cv2.perspectiveTransform(outline[None], H)[0]
+    # The bounding box of the squared area, from the distortion-free outline, padded.
+    px = np.column_stack([on[:, 0] * fx + cx, on[:, 1] * fy + cy])
+    pad = 0.1 * (px.max(0) - px.min(0)) + 2
+    x0, y0 = np.maximum(np.floor(px.min(0) - pad), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(px.max(0) + pad), [w - 1, h - 1]).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        return np.zeros((0, 2), dtype=int)
+    xs, ys = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
+    pix = np.column_stack([xs.ravel(), ys.ravel()]).astype(float)
+    on_board = cv2.perspectiveTransform(undistort_normalized(pix, params)[None], np.linalg.inv(H))[0]
+    white = board.is_white(on_board[:, 0], on_board[:, 1], margin)
+    if amplitude is not None:
+        other = board.is_white(on_board[:, 0] + s, on_board[:, 1], margin)
+        a = amplitude[pix[:, 1].astype(int), pix[:, 0].astype(int)].astype(float)
+        if white.any() and other.any() and np.nanmedian(a[other]) > np.nanmedian(a[white]):
+            white = other
+    return pix[white].astype(int)
+
+
+def _steep(depth: np.ndarray, pix: np.ndarray) -> np.ndarray:
+    """Which of the pixels sit on a depth gradient far above the board's typical one: edges and
+    flying pixels. The typical gradient is taken over these pixels only, not the background."""
+    gy, gx = np.gradient(depth)
+    g = np.hypot(gx, gy)[pix[:, 1], pix[:, 0]]
+    finite = np.isfinite(g)
+    if not finite.any():
+        return np.ones(len(pix), dtype=bool)
+    med = np.median(g[finite])
+    mad = np.median(np.abs(g[finite] - med))
+    # The floor (4 x the median) keeps a noiseless tilted plane, whose gradient barely varies.
+    return ~finite | (g > 4 * med + 6 * 1.4826 * mad)
+
+
+def ransac_inliers(points: np.ndarray, rng: np.random.Generator, iterations: int = 200) -> np.ndarray:
+    """Points on the dominant plane: RANSAC over point triples, then SVD refits at 3 sigma."""
+    n = len(points)
+    normal, offset = _svd_plane(points)
+    d0 = points @ normal - offset
+    tau = 3 * max(1.4826 * np.median(np.abs(d0 - np.median(d0))), 1e-9)
+    tri = rng.integers(0, n, size=(iterations, 3))
+    a, b, c = points[tri[:, 0]], points[tri[:, 1]], points[tri[:, 2]]
+    normals = np.cross(b - a, c - a)
+    lengths = np.linalg.norm(normals, axis=1)
+    ok = lengths > 1e-12
+    best = np.ones(n, dtype=bool)
+    if ok.any():
+        normals = normals[ok] / lengths[ok, None]
+        dist = np.abs(points @ normals.T - np.einsum("ij,ij->i", a[ok], normals))
+        counts = (dist < tau).sum(0)
+        best = dist[:, np.argmax(counts)] < tau
+        if best.sum() < 3:
+            best = np.ones(n, dtype=bool)
+    for _ in range(3):
+        normal, offset = _svd_plane(points[best])
+        dist = points @ normal - offset
+        sigma = max(1.4826 * np.median(np.abs(dist[best])), 1e-12)
+        best = np.abs(dist) < 3 * sigma
+    return best
+
+
+def _svd_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Total least squares plane (unit normal, offset): geometric, for the outlier search only."""
+    centroid = points.mean(0)
+    q = points - centroid
+    normal = np.linalg.eigh(q.T @ q)[1][:, 0]
+    return normal, float(normal @ centroid)
+
+
+@dataclass
+class DepthSamples:
+    """One view's white-square pixels with usable depth: chosen once, re-fitted as K changes."""
+
+    pixels: np.ndarray   # (M, 2) float pixel coordinates (x, y)
+    depth: np.ndarray    # (M,) metres, measured
+
+
+def board_samples(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray,
+                  amplitude: np.ndarray | None = None, margin: float = 0.15) -> DepthSamples:
+    """The white squares' pixels that are valid (not 0 or NaN) and not on a depth step."""
+    pix = white_square_pixels(depth.shape, corners, ids, board, params, margin, amplitude)
+    if len(pix):
+        d = depth[pix[:, 1], pix[:, 0]]
+        keep = np.isfinite(d) & (d > 0) & ~_steep(depth, pix)
+        pix, d = pix[keep], d[keep]
+    if len(pix) < MIN_PLANE_PIXELS:
+        raise CalibrationError(
+            f"only {len(pix)} valid depth pixels on the white squares (need {MIN_PLANE_PIXELS}): "
+            "depth invalid (0 or NaN) over the board, or the board is too small in the image")
+    return DepthSamples(pix.astype(float), d.astype(float))
+
+
+def _directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.ndarray:
+    """Rays scaled so that the point at depth d is d times the ray."""
+    r = rays(pixels, params)
+    return r if convention == "z" else r / np.linalg.norm(r, axis=1, keepdims=True)
+
+
+def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least squares in depth (ToF noise is along the ray, not isotropic as a 3D fit assumes):
+    Gauss-Newton on depth - 1 / (coef . u), started from the linear fit of 1 / depth."""
+    w = depth ** 2
+    coef = np.linalg.lstsq(u * w[:, None], w / depth, rcond=None)[0]
+    for _ in range(iterations):
+        s = u @ coef
+        J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
+        r = depth - 1.0 / s
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        coef = coef + step
+        if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
+            break
+    s = u @ coef
+    r = depth - 1.0 / s
+    J = u / s[:, None] ** 2
+    sigma = float(np.sqrt(r @ r / max(len(r) - 3, 1)))
+    cov = np.linalg.inv(J.T @ J) * sigma ** 2
+    return coef, cov, sigma
+
+
+def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, ransac: bool = True,
+                seed: int = 0) -> Plane:
+    """The board plane through the samples: RANSAC in 3D against outliers (flying pixels,
+    multipath), then the least-squares fit in depth; without RANSAC, for re-fits on samples
+    already cleaned of outliers, only the latter."""
+    u = _directions(samples.pixels, params, convention)
+    if ransac:
+        inliers = ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed))
+    else:
+        inliers = np.ones(len(u), dtype=bool)
+    coef, cov, sigma = _fit_depth_plane(u[inliers], samples.depth[inliers])
+    return Plane(coef, cov, sigma, samples.pixels[inliers].astype(int), inliers, len(u))
+
+
+def corner_depth(plane: Plane, corners: np.ndarray, params: np.ndarray,
+                 convention: str) -> tuple[np.ndarray, np.ndarray]:
+    """Each corner's depth where its ray meets the plane, and that depth's standard error.
+
+    The error is the fitted plane's own at that point, so it tells how much the denoised
+    depth can be trusted, which the residuals of a smooth plane cannot."""
+    u = _directions(corners, params, convention)
+    s = u @ plane.coef
+    g = u / s[:, None] ** 2
+    se = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, plane.covariance, g), 0.0))
+    return 1.0 / s, se
+
+
+def planarize(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray,
+              convention: str, amplitude: np.ndarray | None = None, margin: float = 0.15,
+              seed: int = 0) -> tuple[np.ndarray, Plane]:
+    """Denoised depth at each corner (metres, the given convention) and the fitted plane."""
+    samples = board_samples(depth, corners, ids, board, params, amplitude, margin)
+    plane = fit_samples(samples, params, convention, True, seed)
+    return corner_depth(plane, corners, params, convention)[0], plane
+
+
+def sample_depth(depth: np.ndarray, corners: np.ndarray, radius: int = 1) -> np.ndarray:
+    """Raw depth at each corner: the median of valid pixels in a small window (NaN if none)."""
+    h, w = depth.shape
+    out = np.full(len(corners), np.nan)
+    for k, (x, y) in enumerate(np.rint(corners).astype(int)):
+        win = depth[max(y - radius, 0):min(y + radius + 1, h), max(x - radius, 0):min(x + radius + 1, w)]
+        v = win[np.isfinite(win) & (win > 0)]
+        if v.size:
+            out[k] = np.median(v)
+    return out

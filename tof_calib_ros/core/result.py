@@ -1,0 +1,106 @@
+"""What a calibration returns, and an honest verdict on whether to trust it."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+# Thresholds of the quality verdict; each failed one is given as a reason.
+MAX_PIXEL_RMS = 1.0          # px
+MAX_DEPTH_RMS = 0.02         # m, after the bias correction
+MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
+MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
+
+
+@dataclass
+class ViewReport:
+    """Per-view figures: what a person looks at to find a bad view."""
+
+    index: int                    # position in the caller's list of views
+    rvec: np.ndarray
+    tvec: np.ndarray
+    pixel_rms: float              # px
+    depth_rms: float              # m (NaN when the view has no depth)
+    pixel_residuals: np.ndarray   # (N, 2) predicted - measured
+    depth_residuals: np.ndarray   # (N,)
+    plane_sigma: float = float("nan")   # m, noise of the white-square depth about its plane
+    plane_pixels: int = 0
+
+
+@dataclass
+class CalibrationResult:
+    method: str
+    image_size: tuple[int, int]
+    depth_convention: str
+    K: np.ndarray
+    D: np.ndarray
+    depth_offset: float
+    depth_scale: float
+    std: dict[str, float]
+    views: list[ViewReport]
+    rejected: dict[int, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def pixel_rms(self) -> float:
+        return float(np.sqrt(np.mean(np.concatenate([v.pixel_residuals.ravel() for v in self.views]) ** 2) * 2))
+
+    @property
+    def depth_rms(self) -> float:
+        d = np.concatenate([v.depth_residuals for v in self.views])
+        d = d[np.isfinite(d)]
+        return float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan")
+
+    @property
+    def verdict(self) -> list[str]:
+        """Reasons not to trust the calibration; empty when it passes every check."""
+        reasons = []
+        values = np.r_[self.K.ravel(), self.D, self.depth_offset, self.depth_scale]
+        if not np.all(np.isfinite(values)):
+            return ["the calibration has non-finite values"]
+        if self.pixel_rms > MAX_PIXEL_RMS:
+            reasons.append(f"pixel RMS {self.pixel_rms:.2f} px exceeds {MAX_PIXEL_RMS} px")
+        if np.isfinite(self.depth_rms) and self.depth_rms > MAX_DEPTH_RMS:
+            reasons.append(f"depth RMS {self.depth_rms * 1e3:.1f} mm exceeds {MAX_DEPTH_RMS * 1e3:.0f} mm")
+        for name, f in (("fx", self.K[0, 0]), ("fy", self.K[1, 1])):
+            s = self.std.get(name, float("nan"))
+            if not np.isfinite(s) or s > MAX_FOCAL_REL_STD * f:
+                reasons.append(f"{name} is poorly constrained (std {s:.3g} px): add views at other distances and tilts")
+        for name, size in (("cx", self.image_size[0]), ("cy", self.image_size[1])):
+            s = self.std.get(name, float("nan"))
+            if not np.isfinite(s) or s > MAX_CENTER_REL_STD * size:
+                reasons.append(f"{name} is poorly constrained (std {s:.3g} px): tilt the board more between views")
+        return reasons
+
+    @property
+    def ok(self) -> bool:
+        return not self.verdict
+
+    def to_dict(self) -> dict:
+        """Everything the result holds, as plain JSON-ready types."""
+        return {
+            "method": self.method,
+            "image_width": int(self.image_size[0]),
+            "image_height": int(self.image_size[1]),
+            "depth_convention": self.depth_convention,
+            "camera_matrix": self.K.tolist(),
+            "distortion_model": "plumb_bob",
+            "distortion_coefficients": self.D.tolist(),
+            "depth_offset_m": self.depth_offset,
+            "depth_scale": self.depth_scale,
+            "std": dict(self.std),
+            "pixel_rms": self.pixel_rms,
+            "depth_rms_m": self.depth_rms,
+            "verdict": {"ok": self.ok, "reasons": self.verdict},
+            "notes": list(self.notes),
+            "rejected_views": {str(k): v for k, v in self.rejected.items()},
+            "views": [{
+                "index": v.index, "rvec": v.rvec.tolist(), "tvec": v.tvec.tolist(),
+                "pixel_rms": v.pixel_rms, "depth_rms_m": v.depth_rms,
+                "plane_sigma_m": v.plane_sigma, "plane_pixels": v.plane_pixels,
+                "pixel_residuals": v.pixel_residuals.tolist(),
+                "depth_residuals_m": np.where(np.isfinite(v.depth_residuals), v.depth_residuals, None).tolist(),
+            } for v in self.views],
+        }
