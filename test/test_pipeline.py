@@ -97,3 +97,13 @@ def test_parallel_views_are_refused():
               for dx, dz in ((0, 0), (0.03, 0.1), (-0.03, 0.2))]
     with pytest.raises(CalibrationError, match="same orientation"):
         calibrate([View(f.depth, f.corners) for f in frames], BOARD)
+
+
+def test_a_view_with_unusable_depth_counts_with_its_corners_only():
+    views, _ = _scene(4, 7, noise=sim.Noise(depth=0.003))
+    views[1].depth = np.zeros_like(views[1].depth)
+    res = calibrate(views, BOARD, distortion="plumb_bob")
+    assert len(res.views) == 4
+    assert any(n.startswith("view 1:") and "corners only" in n for n in res.notes)
+    assert np.all(np.isnan(res.views[1].depth_residuals))
+    assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)

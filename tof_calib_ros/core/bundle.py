@@ -1,8 +1,8 @@
 """The joint Levenberg-Marquardt over pixel and depth residuals (the paper's Eq. 8).
 
-Parameters: the intrinsics ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``, a depth bias
-``[offset, scale]`` (measured depth = (1 + scale) * true depth + offset) and one pose
-``[rvec, tvec]`` per view. Each view's pixel and depth residuals are divided by that view's
+Parameters: the intrinsics ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``, the depth bias
+``[offset, scale, tilt_x, tilt_y]`` (see depth_bias) and one pose ``[rvec, tvec]`` per view.
+Each view's pixel and depth residuals are divided by that view's
 standard deviations, so that millimetres and pixels can be added. The Jacobian is analytic
 and sparse (a pose touches only its own view's rows); the normal equations are small enough
 to solve densely, which also gives the covariance used for the reported uncertainties.
@@ -15,29 +15,32 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
+from . import depth_bias
 from .camera import N_INTRINSICS, depth_of, project, transform
 
-N_GLOBAL = N_INTRINSICS + 2  # intrinsics + depth offset + depth scale
-PRIOR_SIGMA = np.array([0.1, 0.05])  # weak priors on depth offset (m) and scale, for identifiability
+N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
 
 
 @dataclass
 class Observations:
     """One view's data: board points, measured pixels, measured depth (NaN where missing).
 
-    ``depth_floor`` bounds the view's depth standard deviation from below: denoised corner
-    depths all come from one plane, so their scatter about the fit understates their error."""
+    Denoised corner depths all come from one plane: ``depth_floor`` (the plane's own standard
+    error) bounds their standard deviation from below, since their scatter about a smooth fit
+    understates it, and ``depth_dof`` says how many independent measurements they are worth
+    (3 for a plane), so that a systematic depth error over a view is not counted once per corner."""
 
     object_points: np.ndarray
     pixels: np.ndarray
     depth: np.ndarray
     depth_floor: float = 0.0
+    depth_dof: float | None = None
 
 
 @dataclass
 class State:
     intrinsics: np.ndarray
-    bias: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(depth_bias.N_BIAS))
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
     def copy(self) -> "State":
@@ -59,9 +62,8 @@ def _view_terms(obs: Observations, state: State, pose: np.ndarray, convention: s
     X, dX = transform(pose[:3], pose[3:], obs.object_points, jac)
     pr = project(X, state.intrinsics, jac)
     d, dd = depth_of(X, convention)
-    offset, scale = state.bias
     dpix = pr.pixels - obs.pixels
-    ddep = (1 + scale) * d + offset - obs.depth
+    ddep = depth_bias.measured(state.bias, d, X) - obs.depth
     if not jac:
         return dpix, ddep, None, None
     n = len(X)
@@ -69,10 +71,11 @@ def _view_terms(obs: Observations, state: State, pose: np.ndarray, convention: s
     jp[:, :, :4] = pr.d_k
     jp[:, :, 4:9] = pr.d_dist
     jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
+    offset, scale, tx, ty = state.bias
     jd = np.zeros((n, N_GLOBAL + 6))
-    jd[:, 9] = 1.0
-    jd[:, 10] = d
-    jd[:, N_GLOBAL:] = (1 + scale) * np.einsum("nj,njk->nk", dd, dX)
+    jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack([np.ones(n), d, X[:, 0], X[:, 1]])
+    grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
+    jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
     return dpix, ddep, jp, jd
 
 
@@ -89,7 +92,7 @@ class Problem:
         self.free_global = np.asarray(free_global, dtype=int)
         self.free_poses = free_poses
         self.weights = weights or [np.ones(len(v.pixels)) for v in views]
-        self.priors = [i for i in (9, 10) if i in set(self.free_global.tolist())]
+        self.priors = [i for i in range(N_INTRINSICS, N_GLOBAL) if i in set(self.free_global.tolist())]
 
     @property
     def n_params(self) -> int:
@@ -144,11 +147,11 @@ class Problem:
                 row += len(rp) + len(rd)
         for i in self.priors:
             k = i - N_INTRINSICS
-            res.append(np.array([state.bias[k] / PRIOR_SIGMA[k]]))
+            res.append(np.array([state.bias[k] / depth_bias.PRIOR_SIGMA[k]]))
             if jac:
                 rows.append(np.array([row]))
                 cols.append(np.array([g_map[i]]))
-                vals.append(np.array([1.0 / PRIOR_SIGMA[k]]))
+                vals.append(np.array([1.0 / depth_bias.PRIOR_SIGMA[k]]))
             row += 1
         r = np.concatenate(res)
         if not jac:
@@ -235,7 +238,9 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
             m = pix[j].size + np.isfinite(dep[j]).sum()
             dof = max(m - 6, 1) / m
             new_px[j] = _robust_sigma(pix[j].ravel(), sigma_floor[0]) / np.sqrt(dof)
-            new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor)
+            n_d = np.isfinite(dep[j]).sum()
+            worth = np.sqrt(n_d / views[j].depth_dof) if views[j].depth_dof and n_d else 1.0
+            new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor) * worth
         sigma_px, sigma_d = new_px, new_d
         if loss == "huber":
             weights = []

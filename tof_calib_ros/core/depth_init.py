@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from .camera import points_from_depth, rays
+from .camera import points_from_depth, rays, split_intrinsics
 from .errors import CalibrationError
 
 
@@ -83,3 +83,12 @@ def pose_from_points(object_points: np.ndarray, points: np.ndarray) -> np.ndarra
     R = Vt.T @ S @ U.T
     t = cb - R @ ca
     return np.r_[cv2.Rodrigues(R)[0].ravel(), t]
+
+
+def pose_from_pixels(object_points: np.ndarray, pixels: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
+    """Pose (rvec, tvec) of a view with no usable depth, from its corners alone."""
+    K, D = split_intrinsics(intrinsics)
+    ok, rvec, tvec = cv2.solvePnP(object_points, pixels, K, D)
+    if not ok:
+        raise CalibrationError("a view's pose could not be found from its corners")
+    return np.r_[rvec.ravel(), tvec.ravel()]

@@ -16,22 +16,22 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import bundle
+from . import bundle, depth_bias as bias_model
 from .board import Board
-from .camera import check_convention, points_from_depth, rays, split_intrinsics
-from .depth_init import focal_guess, pose_from_points, update_intrinsics
+from .camera import N_INTRINSICS, check_convention, split_intrinsics
+from .depth_init import focal_guess, pose_from_pixels, pose_from_points, update_intrinsics
 from .detection import Detection, detect
 from .errors import CalibrationError
-from .planarize import DepthSamples, Plane, board_samples, corner_depth, fit_samples, sample_depth
+from .planarize import DepthSamples, Plane, board_samples, corner_depth, directions, fit_samples, sample_depth
 from .result import INTRINSIC_NAMES, CalibrationResult, ViewReport
 from .traditional import Traditional, calibrate_opencv
 
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
                     "full": [4, 5, 6, 7, 8]}
-DEPTH_BIAS_TERMS = {"none": [], "offset": [9], "offset+scale": [9, 10]}
 MIN_PARALLEL_SPREAD_DEG = 0.5
 NO_BOARD = "no board found"
 MAX_OUTER_ROUNDS = 6
+PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independent numbers
 
 
 @dataclass
@@ -144,31 +144,39 @@ def _distortion_terms(distortion: str, views: list[_Prepared]) -> list[int]:
     return DISTORTION_TERMS["plumb_bob"]
 
 
-def _planarize_all(views: list[_Prepared], samples: list[DepthSamples], intr: np.ndarray, bias: np.ndarray,
-                   convention: str) -> tuple[list[np.ndarray], list[float], list[Plane]]:
-    """Corner depths in the measured domain (the plane is fitted to bias-corrected depth),
-    each view's depth error floor, and the planes."""
-    offset, scale = bias
+def _planarize_all(views: list[_Prepared], samples: list[DepthSamples | None], intr: np.ndarray,
+                   bias: np.ndarray, convention: str) -> tuple[list[np.ndarray], list[float], list[Plane | None]]:
+    """Corner depths as the camera would report them (the plane is fitted to bias-corrected
+    depth, where the board really is flat), each view's depth error floor, and the planes.
+    A view without usable depth gets NaN depths: it counts with its corners only."""
     depths, floors, planes = [], [], []
     for v, smp in zip(views, samples):
-        corrected = DepthSamples(smp.pixels, (smp.depth - offset) / (1 + scale))
-        plane = fit_samples(corrected, intr, convention, ransac=False)
+        if smp is None:
+            depths.append(np.full(len(v.corners), np.nan))
+            floors.append(0.0)
+            planes.append(None)
+            continue
+        corrected = bias_model.true_depth(bias, smp.depth, directions(smp.pixels, intr, convention))
+        plane = fit_samples(DepthSamples(smp.pixels, corrected), intr, convention, ransac=False)
         d, se = corner_depth(plane, v.corners, intr, convention)
-        depths.append((1 + scale) * d + offset)
-        # The corners' depths share one plane (3 degrees of freedom): their joint weight is
-        # that of three independent measurements, not of one per corner.
-        floors.append(float(np.median(se) * (1 + scale) * np.sqrt(len(d) / 3.0)))
+        u = directions(v.corners, intr, convention)
+        depths.append(bias_model.measured(bias, d, u * d[:, None]))
+        floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
     return depths, floors, planes
 
 
-def _check_not_parallel(planes: list[Plane]) -> None:
-    normals = np.array([p.normal for p in planes])
+def _observations(obj, views: list[_Prepared], depths, floors) -> list[bundle.Observations]:
+    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF) for o, v, d, f in zip(obj, views, depths, floors)]
+
+
+def _check_not_parallel(planes: list[Plane | None]) -> None:
+    normals = np.array([p.normal for p in planes if p is not None])
     mean = normals.mean(0)
     mean /= np.linalg.norm(mean)
     spread = np.degrees(np.arccos(np.clip(normals @ mean, -1, 1))).max()
-    if len(planes) > 1 and spread < MIN_PARALLEL_SPREAD_DEG:
-        raise CalibrationError(f"all {len(planes)} views show the board at the same orientation "
+    if len(normals) > 1 and spread < MIN_PARALLEL_SPREAD_DEG:
+        raise CalibrationError(f"all {len(normals)} views show the board at the same orientation "
                                f"(within {spread:.2f} deg): tilt the board differently between views")
 
 
@@ -181,7 +189,7 @@ def _k_update(views, samples, board, intr, bias, convention, estimate_offset, ma
                                              [board.object_points(v.ids) for v in views], convention,
                                              estimate_offset)
         settled = abs(new[0] - intr[0]) < 1e-7 * intr[0] and abs(offset - bias[0]) < 1e-7
-        intr, bias = new, np.array([offset, bias[1]])
+        intr, bias = new, np.r_[offset, bias[1:]]
         if settled:
             break
     return intr, bias, err
@@ -196,12 +204,13 @@ def _report(views: list[_Prepared], fit: bundle.Fit, planes: list[Plane] | None)
             v.index, fit.state.poses[j, :3].copy(), fit.state.poses[j, 3:].copy(),
             float(np.sqrt(np.mean(np.sum(pix ** 2, axis=1)))),
             float(np.sqrt(np.mean(fin ** 2))) if fin.size else float("nan"), pix, dep,
-            planes[j].sigma if planes else float("nan"), len(planes[j].pixels) if planes else 0))
+            planes[j].sigma if planes and planes[j] else float("nan"),
+            len(planes[j].pixels) if planes and planes[j] else 0))
     return out
 
 
 def _std(fit: bundle.Fit) -> dict[str, float]:
-    names = list(INTRINSIC_NAMES) + ["depth_offset", "depth_scale"]
+    names = list(INTRINSIC_NAMES) + list(bias_model.NAMES)
     std = {n: 0.0 for n in names}
     for k, i in enumerate(fit.free_global):
         std[names[i]] = float(np.sqrt(max(fit.covariance[k, k], 0.0)))
@@ -210,8 +219,8 @@ def _std(fit: bundle.Fit) -> dict[str, float]:
 
 def _result(method, image_size, convention, fit, views, planes, rejected, notes) -> CalibrationResult:
     K, D = split_intrinsics(fit.state.intrinsics)
-    return CalibrationResult(method, image_size, convention, K, D, float(fit.state.bias[0]),
-                             float(fit.state.bias[1]), _std(fit), _report(views, fit, planes), rejected, notes)
+    return CalibrationResult(method, image_size, convention, K, D, fit.state.bias.copy(), _std(fit),
+                             _report(views, fit, planes), rejected, notes)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
@@ -229,8 +238,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     convention = check_convention(depth_convention)
     if method not in ("depth", "traditional"):
         raise CalibrationError(f"method must be 'depth' or 'traditional', got {method!r}")
-    if depth_bias not in DEPTH_BIAS_TERMS:
-        raise CalibrationError(f"depth_bias must be one of {sorted(DEPTH_BIAS_TERMS)}, got {depth_bias!r}")
+    bias_terms = [N_INTRINSICS + k for k in bias_model.parse(depth_bias)]
     if loss not in (None, "huber"):
         raise CalibrationError(f"loss must be None or 'huber', got {loss!r}")
     prepared, rejected, image_size = _prepare(views, board, image_size, depth_units)
@@ -250,34 +258,35 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
         say(notes[-1])
 
     if method == "traditional":
-        state = bundle.State(trad.intrinsics.copy(), np.zeros(2), trad.poses.copy())
+        state = bundle.State(trad.intrinsics.copy(), np.zeros(bias_model.N_BIAS), trad.poses.copy())
         nodepth = [bundle.Observations(o, v.corners, np.full(len(o), np.nan)) for o, v in zip(obj, prepared)]
         fit = bundle.solve(nodepth, state, convention, [0, 1, 2, 3, 4, 5, 6, 7], rounds=1, max_iter=0)
         return _result(method, image_size, convention, fit, prepared, None, rejected, notes)
 
-    # Choose each view's plane samples once (white squares, valid depth, RANSAC inliers);
-    # views whose depth is unusable are dropped with the reason.
+    # Choose each view's plane samples once (white squares, valid depth, RANSAC inliers); a view
+    # whose depth is unusable still counts with its corners, and the notes say so.
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
     first = trad.intrinsics if trad is not None else guess
-    usable, samples = [], []
+    samples: list[DepthSamples | None] = []
     for v in prepared:
         try:
             smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude)
             plane = fit_samples(smp, first, convention, ransac=True)
             samples.append(DepthSamples(smp.pixels[plane.inliers], smp.depth[plane.inliers]))
-            usable.append(v)
         except CalibrationError as exc:
-            rejected[v.index] = str(exc)
-    keep = [prepared.index(v) for v in usable]
-    prepared = usable
-    _require(prepared, rejected, min_views, len(views))
-    obj = [obj[k] for k in keep]
-    guesses = [guess] if trad is None or len(keep) != len(trad.poses) else [trad.intrinsics, guess]
-    estimate_offset = 9 in DEPTH_BIAS_TERMS[depth_bias]
+            samples.append(None)
+            notes.append(f"view {v.index}: {exc}; used for its corners only")
+            say(notes[-1])
+    if all(smp is None for smp in samples):
+        raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
+                               "method='traditional' calibrates from the corners alone")
+    guesses = [guess] if trad is None else [trad.intrinsics, guess]
+    estimate_offset = N_INTRINSICS in bias_terms
     best = None
     for g in guesses:
-        intr, bias, err = _k_update(prepared, samples, board, g.copy(), np.zeros(2), convention, estimate_offset)
+        intr, bias, err = _k_update(prepared, samples, board, g.copy(), np.zeros(bias_model.N_BIAS), convention,
+                                    estimate_offset)
         if best is None or err < best[2]:
             best = (intr, bias, err)
     intr, bias, err = best
@@ -285,15 +294,19 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
 
     depths, floors, planes = _planarize_all(prepared, samples, intr, bias, convention)
     _check_not_parallel(planes)
-    poses = np.array([pose_from_points(o, points_from_depth(rays(v.corners, intr), (d - bias[0]) / (1 + bias[1]),
-                                                           convention))
-                      for o, v, d in zip(obj, prepared, depths)])
+    poses = []
+    for o, v, d in zip(obj, prepared, depths):
+        if np.isfinite(d).all():
+            u = directions(v.corners, intr, convention)
+            poses.append(pose_from_points(o, u * bias_model.true_depth(bias, d, u)[:, None]))
+        else:
+            poses.append(pose_from_pixels(o, v.corners, intr))
+    poses = np.array(poses)
     state = bundle.State(intr, bias, poses)
     dist = _distortion_terms(distortion, prepared)
-    bias_terms = DEPTH_BIAS_TERMS[depth_bias]
     # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
-    observations = [bundle.Observations(o, v.corners, d, f) for o, v, d, f in zip(obj, prepared, depths, floors)]
+    observations = _observations(obj, prepared, depths, floors)
     state = bundle.solve(observations, state, convention, [], rounds=1).state
     if dist:
         state = bundle.solve(observations, state, convention, dist, rounds=1).state
@@ -304,9 +317,8 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
         depths, floors, planes = _planarize_all(prepared, samples, state.intrinsics, state.bias, convention)
-        observations = [bundle.Observations(o, v.corners, d, f)
-                        for o, v, d, f in zip(obj, prepared, depths, floors)]
+        observations = _observations(obj, prepared, depths, floors)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)
-        if change[0] < 1e-9 * state.intrinsics[0] and change[9] < 1e-9:
+        if change[0] < 1e-9 * state.intrinsics[0] and change[N_INTRINSICS:].max() < 1e-9:
             break
     return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes)

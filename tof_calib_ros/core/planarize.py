@@ -153,7 +153,7 @@ def board_samples(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board
     return DepthSamples(pix.astype(float), d.astype(float))
 
 
-def _directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.ndarray:
+def directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.ndarray:
     """Rays scaled so that the point at depth d is d times the ray."""
     r = rays(pixels, params)
     return r if convention == "z" else r / np.linalg.norm(r, axis=1, keepdims=True)
@@ -185,7 +185,7 @@ def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, rans
     """The board plane through the samples: RANSAC in 3D against outliers (flying pixels,
     multipath), then the least-squares fit in depth; without RANSAC, for re-fits on samples
     already cleaned of outliers, only the latter."""
-    u = _directions(samples.pixels, params, convention)
+    u = directions(samples.pixels, params, convention)
     if ransac:
         inliers = ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed))
     else:
@@ -200,7 +200,7 @@ def corner_depth(plane: Plane, corners: np.ndarray, params: np.ndarray,
 
     The error is the fitted plane's own at that point, so it tells how much the denoised
     depth can be trusted, which the residuals of a smooth plane cannot."""
-    u = _directions(corners, params, convention)
+    u = directions(corners, params, convention)
     s = u @ plane.coef
     g = u / s[:, None] ** 2
     se = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, plane.covariance, g), 0.0))

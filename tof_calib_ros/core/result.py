@@ -5,6 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .depth_bias import NAMES
+
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 # Thresholds of the quality verdict; each failed one is given as a reason.
@@ -36,12 +38,15 @@ class CalibrationResult:
     depth_convention: str
     K: np.ndarray
     D: np.ndarray
-    depth_offset: float
-    depth_scale: float
+    depth_bias: np.ndarray        # [offset (m), scale, tilt_x, tilt_y], see core.depth_bias
     std: dict[str, float]
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def depth_offset(self) -> float:
+        return float(self.depth_bias[0])
 
     @property
     def pixel_rms(self) -> float:
@@ -57,7 +62,7 @@ class CalibrationResult:
     def verdict(self) -> list[str]:
         """Reasons not to trust the calibration; empty when it passes every check."""
         reasons = []
-        values = np.r_[self.K.ravel(), self.D, self.depth_offset, self.depth_scale]
+        values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
         if self.pixel_rms > MAX_PIXEL_RMS:
@@ -88,8 +93,7 @@ class CalibrationResult:
             "camera_matrix": self.K.tolist(),
             "distortion_model": "plumb_bob",
             "distortion_coefficients": self.D.tolist(),
-            "depth_offset_m": self.depth_offset,
-            "depth_scale": self.depth_scale,
+            "depth_bias": dict(zip(NAMES, map(float, self.depth_bias))),
             "std": dict(self.std),
             "pixel_rms": self.pixel_rms,
             "depth_rms_m": self.depth_rms,

@@ -1,0 +1,173 @@
+"""Real Kinect v2 ToF views (../shared/data/kinect_v2_tof): traditional against depth-aided.
+
+1. A reference calibration from all views, by each method, with its stated uncertainty; the
+   downsampled runs are scored against the full-resolution references, scaled (a calibration
+   of the downsampled views themselves would carry the very bias under test).
+2. Its stability: the odd and the even views calibrated separately.
+3. Few-view calibrations (3 to 7 random views, 20 draws each): focal error against the
+   all-view references, and re-projection RMS on the views left out (each left-out view's
+   pose found by solvePnP with the calibration under test).
+At full resolution (512x424) and downsampled by 0.4 (205x170, PMD class).
+
+    python benchmarks/kinect_real.py [--draws 20] [--data DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tof_calib_ros import Board, CalibrationError, View, calibrate
+from tof_calib_ros.core.detection import detect_corners
+
+BOARD = Board(5, 7, 0.03)
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_v2_tof"
+METHODS = {"traditional": dict(method="traditional"),
+           "ours": dict(method="depth"),
+           "ours+tilt": dict(method="depth", depth_bias="offset+tilt")}
+VIEW_COUNTS = (3, 4, 5, 6, 7)
+
+_views: list[View] = []
+
+
+def load(data: Path, scale: float) -> list[View]:
+    """Views with a detected board; downsampling averages the IR and keeps depth's nearest pixel."""
+    views = []
+    for ir_path in sorted(data.glob("*_ir.png")):
+        ir = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
+        depth = cv2.imread(str(ir_path).replace("_ir.png", "_depth.png"), cv2.IMREAD_UNCHANGED)
+        if scale != 1.0:
+            size = (round(ir.shape[1] * scale), round(ir.shape[0] * scale))
+            ir = cv2.resize(ir, size, interpolation=cv2.INTER_AREA)
+            depth = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
+        corners = detect_corners(ir, BOARD)
+        if corners is not None:
+            views.append(View(depth, corners, amplitude=ir))
+    return views
+
+
+def _init(views):
+    global _views
+    _views = views
+
+
+def heldout_rms(result, views: list[View]) -> float:
+    """Re-projection RMS (px) of views the calibration never saw, each posed by solvePnP."""
+    err = []
+    obj = BOARD.object_points()
+    for v in views:
+        ok, r, t = cv2.solvePnP(obj, v.corners, result.K, result.D)
+        proj, _ = cv2.projectPoints(obj, r, t, result.K, result.D)
+        err.append(proj[:, 0] - v.corners)
+    e = np.concatenate(err)
+    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+
+
+def draw(args) -> dict:
+    n, seed = args
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(_views), size=n, replace=False)
+    rest = [v for i, v in enumerate(_views) if i not in set(pick)]
+    out = {}
+    for name, kwargs in METHODS.items():
+        try:
+            res = calibrate([_views[i] for i in pick], BOARD, **kwargs)
+            out[name] = {"fx": res.K[0, 0], "fy": res.K[1, 1], "heldout_rms": heldout_rms(res, rest)}
+        except CalibrationError as exc:
+            out[name] = {"error": str(exc)}
+    return out
+
+
+def focal_error(got: dict, ref) -> float:
+    if "error" in got:
+        return float("inf")
+    return 0.5 * (abs(got["fx"] / ref[0, 0] - 1) + abs(got["fy"] / ref[1, 1] - 1))
+
+
+def scaled_K(K: np.ndarray, scale: float) -> np.ndarray:
+    """K of an image resized by ``scale`` (pixel centres at integer coordinates)."""
+    out = K.copy()
+    out[:2, :2] *= scale
+    out[:2, 2] = (K[:2, 2] + 0.5) * scale - 0.5
+    return out
+
+
+def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs: dict | None) -> dict:
+    print(f"\n== scale {scale}: {len(views)} views with a board, image "
+          f"{views[0].depth.shape[1]}x{views[0].depth.shape[0]}")
+    refs, report = {}, {"scale": scale, "views": len(views), "reference": {}, "halves": {}, "few_view": []}
+    print(f"{'method':18} {'fx':>16} {'fy':>16} {'cx':>16} {'cy':>16} {'px RMS':>7} {'s':>5}")
+    for name, kwargs in METHODS.items():
+        t0 = time.perf_counter()
+        res = calibrate(views, BOARD, **kwargs)
+        dt = time.perf_counter() - t0
+        refs[name] = res
+        cells = [f"{res.K[i, j]:8.2f} ±{res.std[k]:5.2f}" for (i, j), k in
+                 (((0, 0), "fx"), ((1, 1), "fy"), ((0, 2), "cx"), ((1, 2), "cy"))]
+        print(f"{name:18} {' '.join(f'{c:>16}' for c in cells)} {res.pixel_rms:7.3f} {dt:5.1f}")
+        report["reference"][name] = {"K": res.K.tolist(), "D": res.D.tolist(), "std": res.std,
+                                     "depth_bias": res.depth_bias.tolist(), "pixel_rms": res.pixel_rms}
+    if full_refs is not None:
+        refs = {name: scaled_K(ref, scale) for name, ref in full_refs.items()}
+        print("scored against the full-resolution references, scaled: "
+              + ", ".join(f"{n} fx {k[0, 0]:.2f} fy {k[1, 1]:.2f}" for n, k in refs.items()))
+    else:
+        refs = {name: res.K for name, res in refs.items()}
+    print("stability: odd views vs even views (difference, px)")
+    for name, kwargs in METHODS.items():
+        odd = calibrate(views[1::2], BOARD, **kwargs)
+        even = calibrate(views[0::2], BOARD, **kwargs)
+        diff = [odd.K[0, 0] - even.K[0, 0], odd.K[1, 1] - even.K[1, 1], odd.K[0, 2] - even.K[0, 2],
+                odd.K[1, 2] - even.K[1, 2]]
+        print(f"  {name:18} dfx {diff[0]:+7.2f}  dfy {diff[1]:+7.2f}  dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f}")
+        report["halves"][name] = diff
+    jobs_list = [(n, 1000 * n + k) for n in VIEW_COUNTS for k in range(draws)]
+    with Pool(jobs, initializer=_init, initargs=(views,)) as pool:
+        runs = pool.map(draw, jobs_list, chunksize=1)
+    names = list(METHODS)
+    print(f"few-view, median of {draws} draws: relative focal error vs each all-view reference; "
+          "held-out re-projection RMS (px)")
+    print(f"{'views':>5} | " + " | ".join(f"{m[:14]:>14} vs trad  vs ours  heldout fail" for m in names))
+    for n in VIEW_COUNTS:
+        got = [r for (nn, _), r in zip(jobs_list, runs) if nn == n]
+        row = {"views": n}
+        cells = []
+        for m in names:
+            e_t = float(np.median([focal_error(g[m], refs["traditional"]) for g in got]))
+            e_o = float(np.median([focal_error(g[m], refs["ours"]) for g in got]))
+            ho = [g[m]["heldout_rms"] for g in got if "error" not in g[m]]
+            fails = sum("error" in g[m] for g in got)
+            row[m] = {"focal_err_vs_traditional_ref": e_t, "focal_err_vs_ours_ref": e_o,
+                      "heldout_rms": float(np.median(ho)) if ho else float("inf"), "failures": fails}
+            cells.append(f"{'':14} {e_t:7.4f} {e_o:7.4f} {row[m]['heldout_rms']:7.3f} {fails:4d}")
+        print(f"{n:5d} | " + " | ".join(cells))
+        report["few_view"].append(row)
+    report["refs_K"] = {n: k.tolist() for n, k in refs.items()}
+    return report
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=20)
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "kinect_real.json")
+    args = ap.parse_args()
+    if not args.data.is_dir():
+        raise SystemExit(f"Kinect data not found at {args.data}")
+    full = run_scale(load(args.data, 1.0), 1.0, args.draws, args.jobs, None)
+    low = run_scale(load(args.data, 0.4), 0.4, args.draws, args.jobs,
+                    {n: np.array(k) for n, k in full["refs_K"].items()})
+    reports = [full, low]
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(reports, indent=1, default=float))
+    print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,41 @@
+"""The real Kinect v2 views: a few-view depth-aided calibration against an independent reference.
+
+The reference is OpenCV on all the views, where Zhang's method is well conditioned; the
+depth offset is checked against the 25.5 mm the data set's own calibration found.
+"""
+import cv2
+import numpy as np
+import pytest
+
+from tof_calib_ros import Board, View, calibrate
+from tof_calib_ros.core.detection import detect_corners
+
+BOARD = Board(5, 7, 0.03)
+
+
+@pytest.fixture(scope="module")
+def views(kinect_dir):
+    out = []
+    for ir_path in sorted(kinect_dir.glob("*_ir.png")):
+        ir = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
+        depth = cv2.imread(str(ir_path).replace("_ir.png", "_depth.png"), cv2.IMREAD_UNCHANGED)
+        corners = detect_corners(ir, BOARD)
+        if corners is not None:
+            out.append(View(depth, corners, amplitude=ir))
+    assert len(out) >= 45
+    return out
+
+
+def test_few_views_agree_with_the_all_view_reference(views):
+    reference = calibrate(views, BOARD, method="traditional")
+    ours_err, trad_err = [], []
+    for start in range(5):  # five disjoint sets of 5-6 views
+        subset = views[start::9]
+        ours = calibrate(subset, BOARD)  # 16-bit millimetre depth, as the driver gives it
+        trad = calibrate(subset, BOARD, method="traditional")
+        ours_err.append(np.mean(np.abs(np.diag(ours.K)[:2] / np.diag(reference.K)[:2] - 1)))
+        trad_err.append(np.mean(np.abs(np.diag(trad.K)[:2] / np.diag(reference.K)[:2] - 1)))
+        assert 0.005 < ours.depth_offset < 0.035
+        assert ours.pixel_rms < 0.3 and ours.depth_rms < 0.01
+    assert np.median(ours_err) < 0.01
+    assert np.median(ours_err) < 0.5 * np.median(trad_err)
