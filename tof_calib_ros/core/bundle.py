@@ -2,21 +2,20 @@
 
 Parameters: the intrinsics ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``, the depth bias
 ``[offset, scale, tilt_x, tilt_y]`` (see depth_bias) and one pose ``[rvec, tvec]`` per view.
-Each view's pixel and depth residuals are divided by that view's
-standard deviations, so that millimetres and pixels can be added. The Jacobian is analytic
-and sparse (a pose touches only its own view's rows); the normal equations are small enough
-to solve densely, which also gives the covariance used for the reported uncertainties.
+Each view's pixel and depth residuals are divided by that view's standard deviations, so
+that millimetres and pixels can be added. The Jacobian is analytic and block-sparse: a pose
+touches only its own view's rows. So the normal equations are solved as in bundle
+adjustment, by the Schur complement on the few global parameters, which also gives their
+covariance for the reported uncertainties.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse as sp
 
 from . import depth_bias
-from .camera import N_INTRINSICS, depth_of, project, transform
+from .camera import N_INTRINSICS, depth_of, project, transform_views
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
 
@@ -52,51 +51,52 @@ class Fit:
     state: State
     pixel_residuals: list[np.ndarray]   # per view, (N, 2) predicted - measured, pixels
     depth_residuals: list[np.ndarray]   # per view, (N,) predicted - measured, metres (NaN if no depth)
-    covariance: np.ndarray              # of the free global parameters then the poses
+    covariance: np.ndarray              # of the free global parameters, in the order of free_global
     free_global: np.ndarray             # indices into intrinsics + bias
     cost: float
     iterations: int
 
 
-def _view_terms(obs: Observations, state: State, pose: np.ndarray, convention: str, jac: bool):
-    X, dX = transform(pose[:3], pose[3:], obs.object_points, jac)
-    pr = project(X, state.intrinsics, jac)
-    d, dd = depth_of(X, convention)
-    dpix = pr.pixels - obs.pixels
-    ddep = depth_bias.measured(state.bias, d, X) - obs.depth
-    if not jac:
-        return dpix, ddep, None, None
-    n = len(X)
-    jp = np.zeros((n, 2, N_GLOBAL + 6))
-    jp[:, :, :4] = pr.d_k
-    jp[:, :, 4:9] = pr.d_dist
-    jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
-    offset, scale, tx, ty = state.bias
-    jd = np.zeros((n, N_GLOBAL + 6))
-    jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack([np.ones(n), d, X[:, 0], X[:, 1]])
-    grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
-    jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
-    return dpix, ddep, jp, jd
+@dataclass
+class BlockJacobian:
+    """Rows of the whitened Jacobian: global columns (R, G) and the own view's pose columns (R, 6)."""
+
+    globals_: np.ndarray
+    pose: np.ndarray
+    view: np.ndarray      # (R,) the view each row belongs to
+
+    def dense(self, n_views: int) -> np.ndarray:
+        """The full matrix (for tests and inspection; the solver never forms it)."""
+        J = np.zeros((len(self.view), self.globals_.shape[1] + 6 * n_views))
+        J[:, :self.globals_.shape[1]] = self.globals_
+        cols = self.globals_.shape[1] + 6 * self.view[:, None] + np.arange(6)
+        J[np.arange(len(self.view))[:, None], cols] = self.pose
+        return J
 
 
 class Problem:
     """Residuals and Jacobian for a set of views, with some parameters held fixed."""
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
-                 sigma_depth: np.ndarray, free_global: np.ndarray, free_poses: bool = True,
+                 sigma_depth: np.ndarray, free_global, free_poses: bool = True,
                  weights: list[np.ndarray] | None = None):
-        self.views = views
+        self.n_views = len(views)
         self.convention = convention
-        self.sigma_px = sigma_px
-        self.sigma_depth = sigma_depth
         self.free_global = np.asarray(free_global, dtype=int)
         self.free_poses = free_poses
-        self.weights = weights or [np.ones(len(v.pixels)) for v in views]
-        self.priors = [i for i in range(N_INTRINSICS, N_GLOBAL) if i in set(self.free_global.tolist())]
+        self.points = np.concatenate([v.object_points for v in views])
+        self.pixels = np.concatenate([v.pixels for v in views])
+        self.depth = np.concatenate([v.depth for v in views])
+        self.view = np.concatenate([np.full(len(v.pixels), j) for j, v in enumerate(views)])
+        w = np.sqrt(np.concatenate(weights)) if weights else np.ones(len(self.view))
+        self.has_depth = np.isfinite(self.depth)
+        self.pixel_scale = w / np.asarray(sigma_px)[self.view]
+        self.depth_scale = (w / np.asarray(sigma_depth)[self.view])[self.has_depth]
+        self.priors = [i for i in self.free_global.tolist() if i >= N_INTRINSICS]
 
     @property
     def n_params(self) -> int:
-        return len(self.free_global) + (6 * len(self.views) if self.free_poses else 0)
+        return len(self.free_global) + (6 * self.n_views if self.free_poses else 0)
 
     def unpack(self, x: np.ndarray, base: State) -> State:
         s = base.copy()
@@ -114,72 +114,117 @@ class Problem:
             parts.append(state.poses.ravel())
         return np.concatenate(parts)
 
-    def evaluate(self, state: State, jac: bool):
-        """Whitened residual vector and, when asked, its sparse Jacobian in the free parameters."""
-        res, rows, cols, vals = [], [], [], []
-        g_map = np.full(N_GLOBAL, -1)
-        g_map[self.free_global] = np.arange(len(self.free_global))
-        row = 0
-        for j, obs in enumerate(self.views):
-            dpix, ddep, jp, jd = _view_terms(obs, state, state.poses[j], self.convention, jac)
-            w = np.sqrt(self.weights[j])
-            has_d = np.isfinite(obs.depth)
-            rp = (dpix * (w / self.sigma_px[j])[:, None]).ravel()
-            rd = (ddep[has_d] * w[has_d] / self.sigma_depth[j])
-            res += [rp, rd]
-            if jac:
-                blocks = [(jp * (w / self.sigma_px[j])[:, None, None]).reshape(-1, N_GLOBAL + 6),
-                          jd[has_d] * (w[has_d] / self.sigma_depth[j])[:, None]]
-                for blk in blocks:
-                    m = blk.shape[0]
-                    r_idx = np.arange(row, row + m)
-                    gcols = np.flatnonzero(g_map >= 0)
-                    rows.append(np.repeat(r_idx, len(gcols)))
-                    cols.append(np.tile(g_map[gcols], m))
-                    vals.append(blk[:, gcols].ravel())
-                    if self.free_poses:
-                        base = len(self.free_global) + 6 * j
-                        rows.append(np.repeat(r_idx, 6))
-                        cols.append(np.tile(np.arange(base, base + 6), m))
-                        vals.append(blk[:, N_GLOBAL:].ravel())
-                    row += m
-            else:
-                row += len(rp) + len(rd)
-        for i in self.priors:
-            k = i - N_INTRINSICS
-            res.append(np.array([state.bias[k] / depth_bias.PRIOR_SIGMA[k]]))
-            if jac:
-                rows.append(np.array([row]))
-                cols.append(np.array([g_map[i]]))
-                vals.append(np.array([1.0 / depth_bias.PRIOR_SIGMA[k]]))
-            row += 1
-        r = np.concatenate(res)
+    def raw(self, state: State, jac: bool = False):
+        """Unweighted residuals, predicted minus measured: pixels (N,2) and depth (N,), and
+        when asked their Jacobians in all global and pose parameters, (N,2,G+6) and (N,G+6)."""
+        X, dX = transform_views(state.poses, self.points, self.view, jac)
+        pr = project(X, state.intrinsics, jac)
+        d, dd = depth_of(X, self.convention)
+        dpix = pr.pixels - self.pixels
+        ddep = depth_bias.measured(state.bias, d, X) - self.depth
+        if not jac:
+            return dpix, ddep, None, None
+        n = len(X)
+        jp = np.zeros((n, 2, N_GLOBAL + 6))
+        jp[:, :, :4] = pr.d_k
+        jp[:, :, 4:9] = pr.d_dist
+        jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
+        _, scale, tx, ty = state.bias
+        jd = np.zeros((n, N_GLOBAL + 6))
+        jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack([np.ones(n), d, X[:, 0], X[:, 1]])
+        grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
+        jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
+        return dpix, ddep, jp, jd
+
+    def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
+        """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
+        dpix, ddep, jp, jd = self.raw(state, jac)
+        prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+                          for i in self.priors])
+        r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
+                            ddep[self.has_depth] * self.depth_scale, prior])
         if not jac:
             return r, None
-        J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(row, self.n_params))
-        return r, J
+        rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
+                               jd[self.has_depth] * self.depth_scale[:, None]])
+        view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth]])
+        g = rows[:, self.free_global]
+        pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
+        if self.priors:
+            gp = np.zeros((len(self.priors), len(self.free_global)))
+            for k, i in enumerate(self.priors):
+                gp[k, list(self.free_global).index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+            g = np.vstack([g, gp])
+            pose = np.vstack([pose, np.zeros((len(self.priors), 6))])
+            view = np.concatenate([view, np.zeros(len(self.priors), dtype=int)])
+        return r, BlockJacobian(g, pose, view)
+
+
+@dataclass
+class _Normal:
+    """The normal equations in blocks: U (G,G), W (V,G,6), V (V,6,6), and the gradient."""
+
+    U: np.ndarray
+    W: np.ndarray
+    V: np.ndarray
+    g_glob: np.ndarray
+    g_pose: np.ndarray
+
+
+def _normal(J: BlockJacobian, r: np.ndarray, n_views: int) -> _Normal:
+    order = np.argsort(J.view, kind="stable")
+    starts = np.searchsorted(J.view[order], np.arange(n_views))  # every view has rows
+    g, p, rr = J.globals_[order], J.pose[order], r[order]
+    W = np.add.reduceat(g[:, :, None] * p[:, None, :], starts)
+    V = np.add.reduceat(p[:, :, None] * p[:, None, :], starts)
+    gp = np.add.reduceat(p * rr[:, None], starts)
+    return _Normal(J.globals_.T @ J.globals_, W, V, J.globals_.T @ r, gp)
+
+
+def _solve_normal(N: _Normal, lam: float, free_poses: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Steps (global, pose) of the damped system, by the Schur complement on the globals."""
+    U = N.U + lam * np.diag(np.maximum(np.diag(N.U), 1e-300))
+    if not free_poses:
+        return np.linalg.solve(U, -N.g_glob), np.zeros_like(N.g_pose)
+    dV = np.maximum(np.einsum("vii->vi", N.V), 1e-300)
+    Vinv = np.linalg.inv(N.V + lam * dV[:, :, None] * np.eye(6))
+    WVinv = np.einsum("vgi,vij->vgj", N.W, Vinv)
+    S = U - np.einsum("vgj,vhj->gh", WVinv, N.W)
+    rhs = -N.g_glob + np.einsum("vgj,vj->g", WVinv, N.g_pose)
+    dg = np.linalg.solve(S, rhs) if len(rhs) else rhs
+    dp = -np.einsum("vij,vj->vi", Vinv, N.g_pose + np.einsum("vgi,g->vi", N.W, dg))
+    return dg, dp
+
+
+def global_covariance(N: _Normal, free_poses: bool) -> np.ndarray:
+    """Inverse of the Schur complement: the globals' covariance with the poses marginalised."""
+    if free_poses:
+        S = N.U - np.einsum("vgi,vij,vhj->gh", N.W, np.linalg.pinv(N.V), N.W)
+    else:
+        S = N.U
+    w, vecs = np.linalg.eigh(S)
+    keep = w > 1e-12 * max(w.max(initial=0.0), 1e-300)
+    return (vecs[:, keep] / w[keep]) @ vecs[:, keep].T
 
 
 def levenberg_marquardt(problem: Problem, state: State, max_iter: int = 100,
-                        tol: float = 1e-12) -> tuple[State, np.ndarray, int]:
-    """Marquardt-scaled LM; returns the state, the normal matrix at the solution and iterations."""
-    x = problem.pack(state)
+                        tol: float = 1e-12) -> tuple[State, int]:
+    """Marquardt-scaled LM on the block normal equations."""
     r, J = problem.evaluate(state, True)
     cost = r @ r
     lam = 1e-3
     it = 0
     for it in range(1, max_iter + 1):
-        A = (J.T @ J).toarray()
-        g = J.T @ r
-        diag = np.maximum(np.diag(A), 1e-12 * max(np.diag(A).max(), 1e-300))
+        N = _normal(J, r, problem.n_views)
+        x = problem.pack(state)
         improved = False
         while lam < 1e16:
             try:
-                step = -scipy.linalg.solve(A + lam * np.diag(diag), g, assume_a="pos")
-            except (np.linalg.LinAlgError, ValueError):
+                dg, dp = _solve_normal(N, lam, problem.free_poses)
+            except np.linalg.LinAlgError:
                 lam *= 10
                 continue
+            step = np.concatenate([dg, dp.ravel()]) if problem.free_poses else dg
             trial = problem.unpack(x + step, state)
             r_new, _ = problem.evaluate(trial, False)
             cost_new = r_new @ r_new
@@ -189,7 +234,6 @@ def levenberg_marquardt(problem: Problem, state: State, max_iter: int = 100,
             lam *= 10
         if not improved:
             break
-        x = x + step
         state = trial
         r, J = problem.evaluate(state, True)
         small_step = np.linalg.norm(step) <= tol * (np.linalg.norm(x) + tol)
@@ -198,18 +242,11 @@ def levenberg_marquardt(problem: Problem, state: State, max_iter: int = 100,
         lam = max(lam / 10, 1e-12)
         if small_step or small_gain:
             break
-    A = (J.T @ J).toarray()
-    return state, A, it
+    return state, it
 
 
-def residuals(views: list[Observations], state: State, convention: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Unweighted per-view pixel (N,2) and depth (N,) residuals, predicted minus measured."""
-    pix, dep = [], []
-    for j, obs in enumerate(views):
-        dpix, ddep, _, _ = _view_terms(obs, state, state.poses[j], convention, False)
-        pix.append(dpix)
-        dep.append(ddep)
-    return pix, dep
+def _split(values: np.ndarray, view: np.ndarray, n_views: int) -> list[np.ndarray]:
+    return [values[view == j] for j in range(n_views)]
 
 
 def _robust_sigma(values: np.ndarray, floor: float) -> float:
@@ -229,16 +266,17 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
     total_it = 0
     for _ in range(rounds):
         problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights)
-        state, A, it = levenberg_marquardt(problem, state, max_iter)
+        state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
-        pix, dep = residuals(views, state, convention)
+        dpix, ddep, _, _ = problem.raw(state)
+        pix, dep = _split(dpix, problem.view, n), _split(ddep, problem.view, n)
         # Each view's variance, with its degrees of freedom (6 pose parameters per view).
         new_px, new_d = np.empty(n), np.empty(n)
         for j in range(n):
-            m = pix[j].size + np.isfinite(dep[j]).sum()
+            n_d = np.isfinite(dep[j]).sum()
+            m = pix[j].size + n_d
             dof = max(m - 6, 1) / m
             new_px[j] = _robust_sigma(pix[j].ravel(), sigma_floor[0]) / np.sqrt(dof)
-            n_d = np.isfinite(dep[j]).sum()
             worth = np.sqrt(n_d / views[j].depth_dof) if views[j].depth_dof and n_d else 1.0
             new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor) * worth
         sigma_px, sigma_d = new_px, new_d
@@ -249,9 +287,8 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
                 weights.append(np.where(e <= 2.0, 1.0, 2.0 / np.maximum(e, 1e-12)))
     problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights)
     r, J = problem.evaluate(state, True)
-    A = (J.T @ J).toarray()
     dof = max(len(r) - problem.n_params, 1)
-    scale = (r @ r) / dof
-    cov = scipy.linalg.pinvh(A) * scale
-    pix, dep = residuals(views, state, convention)
-    return Fit(state, pix, dep, cov, problem.free_global, float(r @ r), total_it)
+    cov = global_covariance(_normal(J, r, n), free_poses) * ((r @ r) / dof)
+    dpix, ddep, _, _ = problem.raw(state)
+    return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
+               problem.free_global, float(r @ r), total_it)

@@ -141,13 +141,21 @@ def points_from_depth(rays_z1: np.ndarray, depth: np.ndarray, convention: str) -
 def transform(rvec: np.ndarray, tvec: np.ndarray, points: np.ndarray,
               jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Board points to the camera frame, and d(point)/d(rvec, tvec) (N,3,6) when asked."""
-    R, dR = cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))
-    X = points @ R.T + np.asarray(tvec, dtype=float).reshape(1, 3)
+    poses = np.r_[np.ravel(rvec), np.ravel(tvec)][None]
+    return transform_views(poses, points, np.zeros(len(points), dtype=int), jac)
+
+
+def transform_views(poses: np.ndarray, points: np.ndarray, view: np.ndarray,
+                    jac: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Board points to the camera frame, point ``n`` by pose ``view[n]`` of ``poses`` (V,6)."""
+    rot = [cv2.Rodrigues(np.asarray(p[:3], dtype=float).reshape(3, 1)) for p in poses]
+    R = np.array([r for r, _ in rot])[view]
+    X = np.einsum("nij,nj->ni", R, points) + poses[view, 3:]
     if not jac:
         return X, None
     # cv2 gives dR (3x9): row k is d(R.ravel())/d(rvec_k).
-    dRk = dR.reshape(3, 3, 3)
+    dR = np.array([d.reshape(3, 3, 3) for _, d in rot])[view]
     J = np.zeros((len(points), 3, 6))
-    J[:, :, :3] = np.einsum("kij,nj->nik", dRk, points)
+    J[:, :, :3] = np.einsum("nkij,nj->nik", dR, points)
     J[:, 0, 3] = J[:, 1, 4] = J[:, 2, 5] = 1.0
     return X, J

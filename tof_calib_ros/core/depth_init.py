@@ -42,16 +42,16 @@ def focal_guess(pixels: list[np.ndarray], depth: list[np.ndarray], object_points
     return np.array([f, f, (w - 1) / 2, (h - 1) / 2, 0, 0, 0, 0, 0], dtype=float)
 
 
-def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels, depth, object_points, pairs,
-                          convention: str, estimate_offset: bool) -> np.ndarray:
+def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, depth: np.ndarray,
+                          pairs: tuple[np.ndarray, np.ndarray, np.ndarray], convention: str,
+                          estimate_offset: bool) -> np.ndarray:
+    """Relative square-size errors over all views at once (corners stacked, pair indices global)."""
     intr = base.copy()
     intr[:4] = k[:4]
     offset = k[4] if estimate_offset else 0.0
-    out = []
-    for x, d, (i, j, L) in zip(pixels, depth, pairs):
-        X = points_from_depth(rays(x, intr), d - offset, convention)
-        out.append((np.linalg.norm(X[i] - X[j], axis=1) - L) / L)
-    res = np.concatenate(out)
+    i, j, L = pairs
+    X = points_from_depth(rays(pixels, intr), depth - offset, convention)
+    res = (np.linalg.norm(X[i] - X[j], axis=1) - L) / L
     if estimate_offset:
         res = np.r_[res, offset / 0.1 * 1e-3]  # a weak prior, as in the bundle
     return res[np.isfinite(res)]
@@ -63,10 +63,15 @@ def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: l
     """fx, fy, cx, cy (and a depth offset) that make every square its true size, distortion held.
 
     Returns the intrinsics, the depth offset, and the RMS relative square-size error."""
+    starts = np.cumsum([0] + [len(p) for p in pixels])
     pairs = [neighbour_pairs(o) for o in object_points]
+    stacked = (np.concatenate([i + s for (i, _, _), s in zip(pairs, starts)]),
+               np.concatenate([j + s for (_, j, _), s in zip(pairs, starts)]),
+               np.concatenate([L for (_, _, L) in pairs]))
     k0 = np.r_[intrinsics[:4], 0.0] if estimate_offset else intrinsics[:4].copy()
     sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac",
-                        args=(intrinsics, pixels, depth, object_points, pairs, convention, estimate_offset))
+                        args=(intrinsics, np.concatenate(pixels), np.concatenate(depth), stacked, convention,
+                              estimate_offset))
     out = intrinsics.copy()
     out[:4] = sol.x[:4]
     offset = float(sol.x[4]) if estimate_offset else 0.0

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from . import bundle, depth_bias as bias_model
 from .board import Board
@@ -22,7 +23,8 @@ from .camera import N_INTRINSICS, check_convention, split_intrinsics
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, update_intrinsics
 from .detection import Detection, detect
 from .errors import CalibrationError
-from .planarize import DepthSamples, Plane, board_samples, corner_depth, directions, fit_samples, sample_depth
+from .planarize import (DepthSamples, Plane, board_samples, corner_depth_along, directions, fit_plane_to,
+                        fit_samples, sample_depth)
 from .result import INTRINSIC_NAMES, CalibrationResult, ViewReport
 from .traditional import Traditional, calibrate_opencv
 
@@ -144,22 +146,39 @@ def _distortion_terms(distortion: str, views: list[_Prepared]) -> list[int]:
     return DISTORTION_TERMS["plumb_bob"]
 
 
-def _planarize_all(views: list[_Prepared], samples: list[DepthSamples | None], intr: np.ndarray,
-                   bias: np.ndarray, convention: str) -> tuple[list[np.ndarray], list[float], list[Plane | None]]:
+class _PlaneSamples:
+    """Every view's plane samples, with the distinct pixels among them: views share pixels,
+    and undistorting each distinct pixel once is what keeps hundreds of views fast."""
+
+    def __init__(self, samples: list[DepthSamples | None], width: int):
+        self.samples = samples
+        with_depth = [s for s in samples if s is not None]
+        pix = np.concatenate([s.pixels for s in with_depth]).astype(int)
+        distinct, self.index = np.unique(pix[:, 1] * width + pix[:, 0], return_inverse=True)
+        self.distinct = np.column_stack([distinct % width, distinct // width]).astype(float)
+        self.cuts = np.cumsum([len(s.pixels) for s in with_depth])[:-1]
+
+    def directions(self, intr: np.ndarray, convention: str) -> list[np.ndarray | None]:
+        parts = iter(np.split(directions(self.distinct, intr, convention)[self.index], self.cuts))
+        return [None if s is None else next(parts) for s in self.samples]
+
+
+def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
+                   convention: str) -> tuple[list[np.ndarray], list[float], list[Plane | None]]:
     """Corner depths as the camera would report them (the plane is fitted to bias-corrected
     depth, where the board really is flat), each view's depth error floor, and the planes.
     A view without usable depth gets NaN depths: it counts with its corners only."""
+    corner_dirs = np.split(directions(np.concatenate([v.corners for v in views]), intr, convention),
+                           np.cumsum([len(v.corners) for v in views])[:-1])
     depths, floors, planes = [], [], []
-    for v, smp in zip(views, samples):
+    for v, smp, su, u in zip(views, samples.samples, samples.directions(intr, convention), corner_dirs):
         if smp is None:
             depths.append(np.full(len(v.corners), np.nan))
             floors.append(0.0)
             planes.append(None)
             continue
-        corrected = bias_model.true_depth(bias, smp.depth, directions(smp.pixels, intr, convention))
-        plane = fit_samples(DepthSamples(smp.pixels, corrected), intr, convention, ransac=False)
-        d, se = corner_depth(plane, v.corners, intr, convention)
-        u = directions(v.corners, intr, convention)
+        plane = fit_plane_to(su, bias_model.true_depth(bias, smp.depth, su), smp.pixels)
+        d, se = corner_depth_along(plane, u)
         depths.append(bias_model.measured(bias, d, u * d[:, None]))
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
@@ -170,8 +189,8 @@ def _observations(obj, views: list[_Prepared], depths, floors) -> list[bundle.Ob
     return [bundle.Observations(o, v.corners, d, f, PLANE_DOF) for o, v, d, f in zip(obj, views, depths, floors)]
 
 
-def _check_not_parallel(planes: list[Plane | None]) -> None:
-    normals = np.array([p.normal for p in planes if p is not None])
+def _check_not_parallel(planes: list[Plane]) -> None:
+    normals = np.array([p.normal for p in planes])
     mean = normals.mean(0)
     mean /= np.linalg.norm(mean)
     spread = np.degrees(np.arccos(np.clip(normals @ mean, -1, 1))).max()
@@ -231,9 +250,21 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
 
     ``image_size`` is (width, height), taken from the depth images when not given.
     ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline);
-    ``'depth'`` is the depth-aided method. Raises CalibrationError with the reason when the
-    views cannot be calibrated; check ``result.verdict`` before trusting a result.
+    ``'depth'`` is the depth-aided method. ``depth_bias`` names the depth error terms estimated
+    alongside ('none', or 'offset', 'scale', 'tilt' joined by '+'). ``distortion`` is 'auto'
+    (as many plumb_bob terms as the corners support) or one of 'none', 'k1', 'k1k2',
+    'plumb_bob' (k1 k2 p1 p2), 'full' (with k3). Raises CalibrationError with the reason when
+    the views cannot be calibrated; check ``result.verdict`` before trusting a result.
     """
+    # The linear algebra here is small: BLAS threads only contend (with each other and with
+    # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
+    with threadpool_limits(1):
+        return _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
+                          distortion, loss, min_views, progress)
+
+
+def _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion, loss,
+               min_views, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
     convention = check_convention(depth_convention)
     if method not in ("depth", "traditional"):
@@ -269,31 +300,34 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
                         obj, image_size)
     first = trad.intrinsics if trad is not None else guess
     samples: list[DepthSamples | None] = []
+    first_planes = []
     for v in prepared:
         try:
             smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude)
             plane = fit_samples(smp, first, convention, ransac=True)
             samples.append(DepthSamples(smp.pixels[plane.inliers], smp.depth[plane.inliers]))
+            first_planes.append(plane)
         except CalibrationError as exc:
             samples.append(None)
             notes.append(f"view {v.index}: {exc}; used for its corners only")
             say(notes[-1])
-    if all(smp is None for smp in samples):
+    if not first_planes:
         raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
                                "method='traditional' calibrates from the corners alone")
-    guesses = [guess] if trad is None else [trad.intrinsics, guess]
+    _check_not_parallel(first_planes)
+    plane_samples = _PlaneSamples(samples, image_size[0])
+    # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better.
     estimate_offset = N_INTRINSICS in bias_terms
-    best = None
-    for g in guesses:
-        intr, bias, err = _k_update(prepared, samples, board, g.copy(), np.zeros(bias_model.N_BIAS), convention,
-                                    estimate_offset)
-        if best is None or err < best[2]:
-            best = (intr, bias, err)
-    intr, bias, err = best
+    obj_pts = [board.object_points(v.ids) for v in prepared]
+    guesses = [guess] if trad is None else [trad.intrinsics, guess]
+    start = min(guesses, key=lambda g: update_intrinsics(
+        g, [v.corners for v in prepared], _planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS),
+                                                        convention)[0], obj_pts, convention, estimate_offset)[2])
+    intr, bias, err = _k_update(prepared, plane_samples, board, start.copy(), np.zeros(bias_model.N_BIAS),
+                                convention, estimate_offset)
     say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
 
-    depths, floors, planes = _planarize_all(prepared, samples, intr, bias, convention)
-    _check_not_parallel(planes)
+    depths, floors, planes = _planarize_all(prepared, plane_samples, intr, bias, convention)
     poses = []
     for o, v, d in zip(obj, prepared, depths):
         if np.isfinite(d).all():
@@ -316,9 +350,11 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes = _planarize_all(prepared, samples, state.intrinsics, state.bias, convention)
+        depths, floors, planes = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias, convention)
         observations = _observations(obj, prepared, depths, floors)
-        change = np.abs(np.r_[state.intrinsics, state.bias] - before)
-        if change[0] < 1e-9 * state.intrinsics[0] and change[N_INTRINSICS:].max() < 1e-9:
+        # Settled once no estimated parameter moves by a hundredth of its own uncertainty.
+        change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
+        std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
+        if np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
             break
     return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes)

@@ -9,6 +9,7 @@ RANSAC + SVD, and read each corner's depth where its viewing ray meets that plan
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -71,7 +72,8 @@ def white_square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.nda
         return np.zeros((0, 2), dtype=int)
     xs, ys = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
     pix = np.column_stack([xs.ravel(), ys.ravel()]).astype(float)
-    on_board = cv2.perspectiveTransform(undistort_normalized(pix, params)[None], np.linalg.inv(H))[0]
+    grid = _normalized_grid(tuple(map(float, params)), h, w)
+    on_board = cv2.perspectiveTransform(grid[(ys * w + xs).ravel()][None], np.linalg.inv(H))[0]
     white = board.is_white(on_board[:, 0], on_board[:, 1], margin)
     if amplitude is not None:
         other = board.is_white(on_board[:, 0] + s, on_board[:, 1], margin)
@@ -79,6 +81,13 @@ def white_square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.nda
         if white.any() and other.any() and np.nanmedian(a[other]) > np.nanmedian(a[white]):
             white = other
     return pix[white].astype(int)
+
+
+@lru_cache(maxsize=4)
+def _normalized_grid(params: tuple[float, ...], h: int, w: int) -> np.ndarray:
+    """Undistorted coordinates of every pixel, row-major: computed once for all views."""
+    xs, ys = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    return undistort_normalized(np.column_stack([xs.ravel(), ys.ravel()]), np.array(params))
 
 
 def _steep(depth: np.ndarray, pix: np.ndarray) -> np.ndarray:
@@ -162,13 +171,13 @@ def directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.nd
 def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, float]:
     """Least squares in depth (ToF noise is along the ray, not isotropic as a 3D fit assumes):
     Gauss-Newton on depth - 1 / (coef . u), started from the linear fit of 1 / depth."""
-    w = depth ** 2
-    coef = np.linalg.lstsq(u * w[:, None], w / depth, rcond=None)[0]
+    A = u * (depth ** 2)[:, None]
+    coef = np.linalg.solve(A.T @ A, A.T @ depth)  # 3 unknowns: normal equations are well posed
     for _ in range(iterations):
         s = u @ coef
         J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
         r = depth - 1.0 / s
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step = np.linalg.solve(J.T @ J, -J.T @ r)
         coef = coef + step
         if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
             break
@@ -176,7 +185,7 @@ def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> t
     r = depth - 1.0 / s
     J = u / s[:, None] ** 2
     sigma = float(np.sqrt(r @ r / max(len(r) - 3, 1)))
-    cov = np.linalg.inv(J.T @ J) * sigma ** 2
+    cov = np.linalg.pinv(J.T @ J) * sigma ** 2
     return coef, cov, sigma
 
 
@@ -186,21 +195,31 @@ def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, rans
     multipath), then the least-squares fit in depth; without RANSAC, for re-fits on samples
     already cleaned of outliers, only the latter."""
     u = directions(samples.pixels, params, convention)
-    if ransac:
-        inliers = ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed))
-    else:
-        inliers = np.ones(len(u), dtype=bool)
-    coef, cov, sigma = _fit_depth_plane(u[inliers], samples.depth[inliers])
-    return Plane(coef, cov, sigma, samples.pixels[inliers].astype(int), inliers, len(u))
+    if not ransac:
+        return fit_plane_to(u, samples.depth, samples.pixels)
+    inliers = ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed))
+    plane = fit_plane_to(u[inliers], samples.depth[inliers], samples.pixels[inliers])
+    plane.inliers, plane.n_candidates = inliers, len(u)
+    return plane
+
+
+def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray) -> Plane:
+    """The least-squares plane in depth through samples along known directions."""
+    coef, cov, sigma = _fit_depth_plane(directions, depth)
+    return Plane(coef, cov, sigma, pixels.astype(int), np.ones(len(depth), dtype=bool), len(depth))
 
 
 def corner_depth(plane: Plane, corners: np.ndarray, params: np.ndarray,
                  convention: str) -> tuple[np.ndarray, np.ndarray]:
-    """Each corner's depth where its ray meets the plane, and that depth's standard error.
+    """Each corner's depth where its ray meets the plane, and that depth's standard error."""
+    return corner_depth_along(plane, directions(corners, params, convention))
+
+
+def corner_depth_along(plane: Plane, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Depth where the directions ``u`` meet the plane, and its standard error.
 
     The error is the fitted plane's own at that point, so it tells how much the denoised
     depth can be trusted, which the residuals of a smooth plane cannot."""
-    u = directions(corners, params, convention)
     s = u @ plane.coef
     g = u / s[:, None] ** 2
     se = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", g, plane.covariance, g), 0.0))
@@ -219,10 +238,14 @@ def planarize(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Bo
 def sample_depth(depth: np.ndarray, corners: np.ndarray, radius: int = 1) -> np.ndarray:
     """Raw depth at each corner: the median of valid pixels in a small window (NaN if none)."""
     h, w = depth.shape
-    out = np.full(len(corners), np.nan)
-    for k, (x, y) in enumerate(np.rint(corners).astype(int)):
-        win = depth[max(y - radius, 0):min(y + radius + 1, h), max(x - radius, 0):min(x + radius + 1, w)]
-        v = win[np.isfinite(win) & (win > 0)]
-        if v.size:
-            out[k] = np.median(v)
+    c = np.rint(corners).astype(int)
+    off = np.arange(-radius, radius + 1)
+    xs = c[:, 0, None, None] + off[None, None, :]
+    ys = c[:, 1, None, None] + off[None, :, None]
+    inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+    win = np.where(inside, depth[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)], np.nan).reshape(len(c), -1)
+    win[~(win > 0)] = np.nan
+    out = np.full(len(c), np.nan)
+    some = np.isfinite(win).any(axis=1)
+    out[some] = np.nanmedian(win[some], axis=1)
     return out
