@@ -107,3 +107,32 @@ def test_a_view_with_unusable_depth_counts_with_its_corners_only():
     assert any(n.startswith("view 1:") and "corners only" in n for n in res.notes)
     assert np.all(np.isnan(res.views[1].depth_residuals))
     assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
+
+
+def test_robust_losses_resist_a_misdetected_corner():
+    views, _ = _scene(5, 8, noise=sim.Noise(depth=0.003))
+    rng = np.random.default_rng(8)
+    for v in views:
+        v.corners = v.corners + rng.normal(0, 0.05, v.corners.shape)
+    clean = calibrate(views, BOARD, distortion="plumb_bob")
+    views[2].corners[10] += (12.0, -9.0)  # one corner fifteen pixels off
+    sigma = np.array([clean.std["fx"], clean.std["fy"]])
+    pull = {loss: np.abs((np.diag(calibrate(views, BOARD, distortion="plumb_bob", loss=loss).K)[:2]
+                          - np.diag(clean.K)[:2]) / sigma).max() for loss in (None, "huber", "cauchy")}
+    assert pull[None] > 1.0  # plain least squares is dragged off by more than its own sigma
+    for loss in ("huber", "cauchy"):
+        assert pull[loss] < 0.5  # within half its own sigma of the clean calibration
+    robust = calibrate(views, BOARD, distortion="plumb_bob", loss="cauchy")
+    assert any("dropped outlier corners" in n and "2: [10]" in n for n in robust.notes)
+
+
+def test_verdict_names_what_is_poorly_constrained():
+    views, _ = _scene(4, 9, noise=sim.Noise(depth=0.003))
+    res = calibrate(views, BOARD)
+    assert res.ok
+    res.std["cx"] = 50.0
+    res.views[0].pixel_residuals = res.views[0].pixel_residuals + 5.0
+    reasons = " ".join(res.verdict)
+    assert "cx is poorly constrained" in reasons and "pixel RMS" in reasons
+    assert not res.ok
+    assert res.to_dict()["verdict"]["ok"] is False

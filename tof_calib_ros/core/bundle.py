@@ -18,6 +18,16 @@ from . import depth_bias
 from .camera import N_INTRINSICS, depth_of, project, transform_views
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
+RAYLEIGH_MEDIAN = np.sqrt(2 * np.log(2))  # median length of a 2-D Gaussian residual, in sigmas
+LOSS_SCALE = 2.0  # residuals within this many sigmas count in full
+
+
+def loss_weights(loss: str, e: np.ndarray) -> np.ndarray:
+    """Iteratively-reweighted least squares weights for residual lengths ``e`` in sigmas:
+    'huber' bounds an outlier's pull, 'cauchy' all but removes a gross one."""
+    if loss == "huber":
+        return np.where(e <= LOSS_SCALE, 1.0, LOSS_SCALE / np.maximum(e, 1e-12))
+    return 1.0 / (1.0 + (e / LOSS_SCALE) ** 2)
 
 
 @dataclass
@@ -258,7 +268,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
           rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
           max_iter: int = 100) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
-    normalisation); ``loss='huber'`` down-weights outlying corners by iterative reweighting."""
+    normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners."""
     n = len(views)
     sigma_px = np.ones(n)
     sigma_d = np.full(n, 0.01)
@@ -276,15 +286,15 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
             n_d = np.isfinite(dep[j]).sum()
             m = pix[j].size + n_d
             dof = max(m - 6, 1) / m
-            new_px[j] = _robust_sigma(pix[j].ravel(), sigma_floor[0]) / np.sqrt(dof)
+            if loss:  # the outliers must not set the scale they are judged by
+                new_px[j] = max(np.median(np.hypot(pix[j][:, 0], pix[j][:, 1])) / RAYLEIGH_MEDIAN, sigma_floor[0])
+            else:
+                new_px[j] = _robust_sigma(pix[j].ravel(), sigma_floor[0]) / np.sqrt(dof)
             worth = np.sqrt(n_d / views[j].depth_dof) if views[j].depth_dof and n_d else 1.0
             new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor) * worth
         sigma_px, sigma_d = new_px, new_d
-        if loss == "huber":
-            weights = []
-            for j in range(n):
-                e = np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]
-                weights.append(np.where(e <= 2.0, 1.0, 2.0 / np.maximum(e, 1e-12)))
+        if loss:
+            weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)

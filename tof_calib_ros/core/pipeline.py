@@ -33,6 +33,7 @@ DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6
 MIN_PARALLEL_SPREAD_DEG = 0.5
 NO_BOARD = "no board found"
 MAX_OUTER_ROUNDS = 6
+OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and the views recalibrated
 PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independent numbers
 
 
@@ -253,14 +254,54 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     ``'depth'`` is the depth-aided method. ``depth_bias`` names the depth error terms estimated
     alongside ('none', or 'offset', 'scale', 'tilt' joined by '+'). ``distortion`` is 'auto'
     (as many plumb_bob terms as the corners support) or one of 'none', 'k1', 'k1k2',
-    'plumb_bob' (k1 k2 p1 p2), 'full' (with k3). Raises CalibrationError with the reason when
+    'plumb_bob' (k1 k2 p1 p2), 'full' (with k3). ``loss`` 'huber' or 'cauchy' makes the fit
+    robust to misdetected corners. Raises CalibrationError with the reason when
     the views cannot be calibrated; check ``result.verdict`` before trusting a result.
     """
     # The linear algebra here is small: BLAS threads only contend (with each other and with
     # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
     with threadpool_limits(1):
-        return _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
-                          distortion, loss, min_views, progress)
+        result = _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
+                            distortion, loss, min_views, progress)
+        if loss is None:
+            return result
+        # A robust loss bounds a misdetected corner's pull but still lets it shape the first
+        # guesses and the planes: drop the corners it exposed and calibrate once more.
+        dropped = _outlier_corners(result, views, board)
+        if not dropped:
+            return result
+        cleaned = [View(v.depth, *_without(v, board, dropped.get(i, [])), v.amplitude)
+                   for i, v in enumerate(views)]
+        again = _calibrate(cleaned, board, image_size, depth_convention, method, depth_units, depth_bias,
+                           distortion, loss, min_views, progress)
+        again.notes.append("dropped outlier corners (view: board indices): "
+                           + "; ".join(f"{i}: {ids}" for i, ids in sorted(dropped.items())))
+        return again
+
+
+def _outlier_corners(result: CalibrationResult, views: Sequence[View], board: Board) -> dict[int, list[int]]:
+    """Board indices, per view, of corners over OUTLIER_SIGMAS robust sigmas from the fit."""
+    out = {}
+    for rep in result.views:
+        e = np.hypot(rep.pixel_residuals[:, 0], rep.pixel_residuals[:, 1])
+        sigma = np.median(e) / bundle.RAYLEIGH_MEDIAN
+        bad = np.flatnonzero(e > OUTLIER_SIGMAS * max(sigma, 1e-6))
+        if bad.size:
+            v = views[rep.index]
+            ids = np.arange(board.n_corners) if v.ids is None else np.asarray(v.ids)
+            out[rep.index] = [int(k) for k in ids[bad]]
+    return out
+
+
+def _without(view: View, board: Board, drop: list[int]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The view's corners and ids less the dropped board indices (detected corners are kept as
+    detected: they are re-detected identically)."""
+    if not drop:
+        return view.corners, view.ids
+    ids = np.arange(board.n_corners) if view.ids is None else np.asarray(view.ids)
+    corners = view.corners if view.corners is not None else detect(np.asarray(view.amplitude), board).corners
+    keep = ~np.isin(ids, drop)
+    return np.asarray(corners)[keep], ids[keep]
 
 
 def _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion, loss,
@@ -270,8 +311,8 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
     if method not in ("depth", "traditional"):
         raise CalibrationError(f"method must be 'depth' or 'traditional', got {method!r}")
     bias_terms = [N_INTRINSICS + k for k in bias_model.parse(depth_bias)]
-    if loss not in (None, "huber"):
-        raise CalibrationError(f"loss must be None or 'huber', got {loss!r}")
+    if loss not in (None, "huber", "cauchy"):
+        raise CalibrationError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
     prepared, rejected, image_size = _prepare(views, board, image_size, depth_units)
     say(f"{len(prepared)} of {len(views)} views have a board")
     _require(prepared, rejected, min_views, len(views))
