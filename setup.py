@@ -21,6 +21,5 @@ setup(
     maintainer_email="maintainers@tof-calib-ros.invalid",
     description="Depth-aided intrinsic calibration of time-of-flight cameras.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={"console_scripts": []},
 )

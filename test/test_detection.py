@@ -12,7 +12,6 @@ from tof_calib_ros.core.board import Board
 from tof_calib_ros.core.detection import detect, detect_corners, tone_map
 from tof_calib_ros.core.errors import CalibrationError
 
-KINECT = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_v2_tof"
 KINECT_BOARD = Board(5, 7, 0.03)
 SIM_BOARD = Board(8, 6, 0.02)
 
@@ -23,18 +22,9 @@ def _axes(corners: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
     return np.diff(g, axis=1).mean(axis=(0, 1)), np.diff(g, axis=0).mean(axis=(0, 1))
 
 
-def _kinect_views() -> list[Path]:
-    if not KINECT.is_dir():
-        pytest.skip(f"Kinect v2 data not found at {KINECT} (the shared data folder beside the checkout)")
-    views = sorted(KINECT.glob("*_ir.png"))
-    if not views:
-        pytest.skip(f"no *_ir.png views in {KINECT}")
-    return views
-
-
 @pytest.fixture(scope="module")
-def kinect_detections():
-    return [(p, cv2.imread(str(p), cv2.IMREAD_UNCHANGED)) for p in _kinect_views()]
+def kinect_detections(kinect_dir: Path):
+    return [(p, cv2.imread(str(p), cv2.IMREAD_UNCHANGED)) for p in sorted(kinect_dir.glob("*_ir.png"))]
 
 
 def test_kinect_detects_nearly_all_views_in_a_consistent_order(kinect_detections):
