@@ -52,7 +52,7 @@ class State:
     bias: np.ndarray = field(default_factory=lambda: np.zeros(depth_bias.N_BIAS))
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
-    def copy(self) -> "State":
+    def copy(self) -> State:
         return State(self.intrinsics.copy(), self.bias.copy(), self.poses.copy())
 
 

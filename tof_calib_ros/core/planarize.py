@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from .board import Board
-from .camera import points_from_depth, rays, undistort_normalized
+from .camera import rays, undistort_normalized
 from .errors import CalibrationError
 
 MIN_PLANE_PIXELS = 30
