@@ -10,7 +10,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl"],
+    install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl", "PyYAML"],
     extras_require={
         "ros": ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"],
         "test": ["pytest"],

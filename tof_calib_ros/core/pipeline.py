@@ -30,7 +30,7 @@ from .traditional import Traditional, calibrate_opencv
 
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
                     "full": [4, 5, 6, 7, 8]}
-MIN_PARALLEL_SPREAD_DEG = 0.5
+MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
 NO_BOARD = "no board found"
 MAX_OUTER_ROUNDS = 6
 OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and the views recalibrated

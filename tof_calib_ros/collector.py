@@ -1,0 +1,265 @@
+"""Choosing calibration views from a live or replayed ToF stream.
+
+As in ROS camera_calibration (image_pipeline), each frame with a whole, still board is described
+by a vector of normalised parameters, and it is kept only when that vector is far enough from
+every view kept so far; the progress per parameter tells the user what is still missing. Besides
+camera_calibration's X, Y, size and skew, two ToF axes count: the board's distance, because a
+depth offset and the focal length can only be told apart from boards at several distances, and
+its tilt, measured in the depth rather than guessed from the outline.
+
+Rules (``CollectorConfig`` holds the numbers):
+
+- distance between views: L1 (Manhattan, camera_calibration's) over the six axes, each in 0..1;
+  a view is new when it is at least ``min_distance`` from every kept view;
+- stillness: a frame counts only when the previous frame (at most ``max_gap_s`` earlier) showed
+  the board at most ``motion_px`` RMS away, so a board moving during the exposure (blur, and ToF
+  motion artefacts in the depth) is never kept; this costs one frame of latency where waiting for
+  the next frame would cost a pending candidate;
+- when ``max_views`` are kept, no more are accepted: the set is then far beyond what the
+  calibration needs, and kept views are never swapped, so progress only ever rises.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from .core.board import Board
+from .core.detection import Detection, detect
+from .core.errors import CalibrationError
+from .core.pipeline import View, depth_in_metres
+from .core.planarize import sample_depth
+
+AXES = ("x", "y", "size", "skew", "depth", "tilt")
+# Small values are no achievement on these axes (camera_calibration: size and skew), so their
+# range starts at 0 and only their largest value counts.
+_FROM_ZERO = {"size", "skew", "tilt"}
+# The outline checked against the image border lies this many squares beyond the outer corners:
+# a corner is located from the squares around it, so those must be in the image too.
+EDGE_SQUARES = 0.5
+
+
+@dataclass(frozen=True)
+class CollectorConfig:
+    """``spans``: per axis of ``AXES``, the range of kept views that counts as full progress
+    (camera_calibration's 0.7, 0.7, 0.4, 0.5, then depth and tilt)."""
+
+    min_distance: float = 0.2
+    max_views: int = 100
+    min_views: int = 10
+    motion_px: float = 1.0
+    max_gap_s: float = 1.0
+    border_px: float = 2.0
+    min_depth_fraction: float = 0.5
+    depth_range: tuple[float, float] = (0.3, 3.0)
+    max_tilt_deg: float = 60.0
+    spans: tuple[float, ...] = (0.7, 0.7, 0.4, 0.5, 0.3, 0.5)
+
+    def __post_init__(self) -> None:
+        lo, hi = self.depth_range
+        checks = [
+            (self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}"),
+            (self.max_views >= 1, f"max_views must be >= 1, got {self.max_views}"),
+            (self.min_views >= 1, f"min_views must be >= 1, got {self.min_views}"),
+            (self.motion_px > 0, f"motion_px must be positive, got {self.motion_px}"),
+            (self.max_gap_s > 0, f"max_gap_s must be positive, got {self.max_gap_s}"),
+            (self.border_px >= 0, f"border_px must be >= 0, got {self.border_px}"),
+            (0 < self.min_depth_fraction <= 1,
+             f"min_depth_fraction must be in (0, 1], got {self.min_depth_fraction}"),
+            (0 <= lo < hi, f"depth_range must be (near, far) metres with near < far, got {self.depth_range}"),
+            (0 < self.max_tilt_deg <= 90, f"max_tilt_deg must be in (0, 90], got {self.max_tilt_deg}"),
+            (len(self.spans) == len(AXES) and all(s > 0 for s in self.spans),
+             f"spans must be {len(AXES)} positive numbers (one per axis {AXES}), got {self.spans}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise CalibrationError(message)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of one frame. ``params`` (one value per ``AXES``) once the board passed every
+    check up to novelty; ``corners`` whenever a board was found, for drawing it."""
+
+    accepted: bool
+    reason: str
+    params: np.ndarray | None = None
+    corners: np.ndarray | None = None
+
+
+class ViewCollector:
+    """Keeps the frames worth calibrating from, copied, and nothing of the rest of the stream.
+
+    Not thread safe: feed it from one thread.
+    """
+
+    def __init__(self, board: Board, config: CollectorConfig | None = None) -> None:
+        self.board = board
+        self.config = CollectorConfig() if config is None else config
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every view and the stream so far, as at start-up."""
+        self._views: list[View] = []
+        self._params: list[np.ndarray] = []
+        self._size: tuple[int, int] | None = None
+        self._previous: tuple[float, np.ndarray] | None = None  # stamp and corners of the last frame
+        self._frames = 0
+        self._last_reason = "no frame yet"
+
+    @property
+    def views(self) -> list[View]:
+        """The kept views, oldest first, ready for ``calibrate``."""
+        return list(self._views)
+
+    def add(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float) -> Outcome:
+        """Judge one frame: amplitude image, depth (float metres with NaN or 0 invalid; integer
+        images are millimetres, as ``calibrate`` reads them) and its time in seconds."""
+        amplitude = np.asarray(amplitude)
+        depth_m = np.asarray(depth_m)
+        if amplitude.ndim != 2 or amplitude.shape != depth_m.shape:
+            raise CalibrationError(f"amplitude {amplitude.shape} and depth {depth_m.shape} must be "
+                                   "single-channel images of the same size")
+        self._frames += 1
+        outcome = self._judge(amplitude, depth_m, float(stamp))
+        self._last_reason = outcome.reason
+        # The caller gets its own arrays: changing them must not change the kept state.
+        return replace(outcome, params=None if outcome.params is None else outcome.params.copy(),
+                       corners=None if outcome.corners is None else outcome.corners.copy())
+
+    def progress(self) -> dict:
+        """Per axis the covered range [lo, hi] of kept views and its progress 0..1 towards the
+        axis' span; frame and view counts; the last frame's reason; whether to calibrate now."""
+        cfg = self.config
+        params = np.array(self._params).reshape(-1, len(AXES))
+        axes = {}
+        for i, name in enumerate(AXES):
+            lo, hi = (float(params[:, i].min()), float(params[:, i].max())) if len(params) else (0.0, 0.0)
+            if name in _FROM_ZERO:
+                lo = 0.0
+            axes[name] = {"lo": lo, "hi": hi, "progress": min((hi - lo) / cfg.spans[i], 1.0)}
+        good = len(params) >= cfg.min_views and all(a["progress"] >= 1.0 for a in axes.values())
+        return {"axes": axes, "frames": self._frames, "views": len(params),
+                "last_reason": self._last_reason, "good_enough": good}
+
+    def _judge(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float) -> Outcome:
+        cfg = self.config
+        h, w = depth_m.shape
+        if self._size is not None and (w, h) != self._size:
+            return Outcome(False, f"image is {w}x{h} but the kept views are {self._size[0]}x{self._size[1]}; "
+                                  "reset the collector to start over at the new size")
+        try:
+            found = detect(amplitude, self.board)
+        except CalibrationError as exc:  # a blank or constant frame
+            found = Detection(None, str(exc))
+        previous, self._previous = self._previous, None
+        if found.corners is None:
+            return Outcome(False, found.message)
+        corners = found.corners
+        self._previous = (stamp, corners)
+
+        partial = self._off_image(corners, w, h)
+        if partial:
+            return Outcome(False, partial, corners=corners)
+        depth = depth_in_metres(depth_m)
+        z = sample_depth(depth, corners)
+        valid = int(np.isfinite(z).sum())
+        if valid < cfg.min_depth_fraction * len(z):
+            return Outcome(False, f"no valid depth on the board: {valid} of {len(z)} corners have depth "
+                                  f"(need {cfg.min_depth_fraction:.0%})", corners=corners)
+        moving = self._motion(previous, stamp, corners)
+        if moving:
+            return Outcome(False, moving, corners=corners)
+
+        params = self._parameters(corners, z, w, h)
+        if self._params:
+            nearest = float(np.abs(np.array(self._params) - params).sum(axis=1).min())
+            if nearest < cfg.min_distance:
+                return Outcome(False, f"too similar to a kept view (distance {nearest:.2f} < "
+                                      f"{cfg.min_distance:g}): move, turn or tilt the board", params, corners)
+        if len(self._views) >= cfg.max_views:
+            return Outcome(False, f"view limit reached ({cfg.max_views} views kept)", params, corners)
+        self._views.append(View(depth=depth.astype(np.float32), corners=corners.copy(),
+                                amplitude=amplitude.copy()))
+        self._params.append(params)
+        self._size = (w, h)
+        return Outcome(True, f"accepted as view {len(self._views)}", params, corners)
+
+    def _off_image(self, corners: np.ndarray, w: int, h: int) -> str | None:
+        """Why the board is not wholly in the image with room to spare, or None when it is."""
+        b = self.board
+        margin = EDGE_SQUARES * b.square
+        far_x, far_y = (b.cols - 1) * b.square + margin, (b.rows - 1) * b.square + margin
+        outline = np.array([[-margin, -margin], [far_x, -margin], [far_x, far_y], [-margin, far_y]])
+        H, _ = cv2.findHomography(b.object_points()[:, :2], corners, 0)
+        if H is None:
+            return "partial board: its corners do not form a plane grid"
+        edge = cv2.perspectiveTransform(outline[None], H)[0]
+        m = self.config.border_px
+        if np.all((edge >= m) & (edge <= np.array([w - 1 - m, h - 1 - m]))):
+            return None
+        return (f"partial board: its outer squares come within {m:g} px of the image border, "
+                "where corners are unreliable")
+
+    def _motion(self, previous: tuple[float, np.ndarray] | None, stamp: float,
+                corners: np.ndarray) -> str | None:
+        """Why the board cannot be trusted to be still, or None when the previous frame shows it is."""
+        cfg = self.config
+        if previous is None:
+            return "board just appeared: waiting for the next frame to check that it is still"
+        dt = stamp - previous[0]
+        if not 0 < dt <= cfg.max_gap_s:
+            return (f"previous frame with the board is {dt:+.2f} s away (need 0..{cfg.max_gap_s:g} s): "
+                    "cannot tell whether the board is still")
+        rms = float(np.sqrt(np.mean(np.sum((corners - previous[1]) ** 2, axis=1))))
+        if rms > cfg.motion_px:
+            return f"board moving: {rms:.1f} px RMS since the previous frame (limit {cfg.motion_px:g} px)"
+        return None
+
+    def _parameters(self, corners: np.ndarray, z: np.ndarray, w: int, h: int) -> np.ndarray:
+        """The view's place on each axis of ``AXES``, each in 0..1."""
+        cfg = self.config
+        c = self.board.cols
+        up_left, up_right, down_right, down_left = corners[[0, c - 1, -1, -c]]
+        d1, d2 = down_right - up_left, down_left - up_right
+        area = 0.5 * abs(d1[0] * d2[1] - d1[1] * d2[0])  # any simple quadrilateral: half the diagonals' cross
+        side = np.sqrt(area)
+        # As camera_calibration: the centre's range shrinks by half the board on each side, or a
+        # large board could hardly score on X and Y.
+        centre = corners.mean(axis=0)
+        x = (centre[0] - side / 2) / max(w - side, 1.0)
+        y = (centre[1] - side / 2) / max(h - side, 1.0)
+        size = np.sqrt(area / (w * h))
+        a, b = up_left - up_right, down_right - up_right
+        angle = np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
+        skew = 2 * abs(np.pi / 2 - angle)
+        near, far = cfg.depth_range
+        depth = (np.nanmedian(z) - near) / (far - near)
+        tilt = _tilt_deg(corners, z, self.board, w, h) / cfg.max_tilt_deg
+        return np.clip(np.array([x, y, size, skew, depth, tilt], dtype=float), 0.0, 1.0)
+
+
+def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) -> float:
+    """Angle between the board's normal and the optical axis, from a plane through the corners
+    back-projected with their depth.
+
+    There is no calibration yet, so the principal point is taken at the image centre and the
+    focal length from the board itself: adjacent corners are one square apart in 3D, which fixes
+    f (the median over all pairs with depth). A guess such as f = image width would scale tilts
+    by up to 40 % on common sensors. Depth is read as z; radial depth bends the result by a few
+    degrees at most near the image edge, which does not matter for telling views apart.
+    """
+    p = corners - np.array([(w - 1) / 2, (h - 1) / 2])
+    pz = (p * z[:, None]).reshape(board.rows, board.cols, 2)
+    zz = z.reshape(board.rows, board.cols)
+    along = [np.sum(np.diff(pz, axis=k) ** 2, axis=2) for k in (0, 1)]          # |d(p z)|^2, px^2 m^2
+    room = [board.square ** 2 - np.diff(zz, axis=k) ** 2 for k in (0, 1)]       # in-image part^2, m^2
+    a, r = np.concatenate([x.ravel() for x in along]), np.concatenate([x.ravel() for x in room])
+    ok = np.isfinite(a) & np.isfinite(r) & (r > 0) & (a > 0)
+    f = float(np.sqrt(np.median(a[ok] / r[ok]))) if ok.sum() >= 3 else float(w)
+    valid = np.isfinite(z)
+    points = np.column_stack([p[valid] * z[valid, None] / f, z[valid]])
+    q = points - points.mean(axis=0)
+    normal = np.linalg.eigh(q.T @ q)[1][:, 0]
+    return float(np.degrees(np.arccos(min(abs(normal[2]), 1.0))))
