@@ -1,6 +1,15 @@
+import sys
+
 from setuptools import find_packages, setup
 
 package_name = "tof_calib_ros"
+executables = ["calibration_node", "tof_sim_node"]
+# colcon puts the console scripts in lib/<package> (setup.cfg); a pip-built wheel cannot, so it
+# carries small launchers there instead, where 'ros2 run' looks. Only in wheels (pip's PEP 517
+# build runs 'setup.py bdist_wheel' too): in a colcon install they would overwrite the scripts.
+# An sdist lists them as well, so that a wheel built from it ('python -m build') has them.
+wheel_only = {"bdist_wheel", "sdist"} & set(sys.argv)
+launchers = [("lib/" + package_name, ["launchers/" + e for e in executables])] if wheel_only else []
 
 setup(
     name=package_name,
@@ -9,7 +18,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-    ],
+    ] + launchers,
     install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl", "PyYAML"],
     extras_require={
         "ros": ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"],
@@ -21,5 +30,8 @@ setup(
     maintainer_email="maintainers@tof-calib-ros.invalid",
     description="Depth-aided intrinsic calibration of time-of-flight cameras.",
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": [
+        "calibration_node = tof_calib_ros.node:main",
+        "tof_sim_node = tof_calib_ros.sim_node:main",
+    ]},
 )

@@ -7,4 +7,5 @@ if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
 fi
+rm -rf build ./*.egg-info  # a stale build/ would put deleted modules into the wheel
 "$VENV/bin/python" -m pip install -q ".[ros,test]"

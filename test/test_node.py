@@ -1,0 +1,277 @@
+"""The ROS nodes as a user runs them: separate processes started as `ros2 run` does, driven
+through their topics, services and parameters from rclpy.
+
+Needs the package installed non-editable (pip install .[ros,test]), so that the ament index
+and <prefix>/lib/tof_calib_ros hold it; skips otherwise. Each test starts its own nodes, in a
+namespace of its own where it can, so a slow shutdown in one test never answers for another.
+"""
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from ros_helpers import NodeProcess, Spinner, executable, logs, ros_environment, wait_until  # noqa: E402
+from tof_calib_ros import sim  # noqa: E402
+from tof_calib_ros.calibration_file import read_camera_yaml  # noqa: E402
+
+CALIBRATE_TIMEOUT_S = 90.0
+START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
+
+
+@pytest.fixture(scope="module")
+def ros():
+    """This run's ROS environment and an rclpy context in it (set up before rclpy.init)."""
+    env = ros_environment()
+    executable("calibration_node")   # skips the module when the package is not installed
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield env, context
+    rclpy.shutdown(context=context)
+
+
+@pytest.fixture
+def launch(ros, tmp_path):
+    """start(name, *ros_args) -> NodeProcess; stopped (SIGINT, then kill) after the test, and
+    their output printed, which pytest shows when the test failed."""
+    env, _ = ros
+    procs: list[NodeProcess] = []
+
+    def start(name: str, *args: str) -> NodeProcess:
+        proc = NodeProcess(name, list(args), tmp_path, env)
+        procs.append(proc)
+        return proc
+
+    yield start
+    for proc in procs:
+        proc.stop()
+    for proc in procs:
+        print(proc.tail(200))
+
+
+@pytest.fixture
+def spinner(ros):
+    _, context = ros
+    s = Spinner(context, "tof_calib_test")
+    yield s
+    s.close()
+
+
+def call_together(spinner: Spinner, name: str, n: int, timeout: float, *procs: NodeProcess) -> list:
+    """n Trigger calls sent at once; every one must be answered."""
+    client = spinner.node.create_client(Trigger, name)
+    try:
+        assert client.wait_for_service(timeout_sec=timeout), f"{name} not available\n" + logs(*procs)
+        futures = [client.call_async(Trigger.Request()) for _ in range(n)]
+        done = [threading.Event() for _ in futures]
+        for f, d in zip(futures, done):
+            f.add_done_callback(lambda _f, d=d: d.set())
+        for d in done:
+            assert d.wait(timeout), f"one of {n} simultaneous calls of {name} was not answered\n" + logs(*procs)
+        return [f.result() for f in futures]
+    finally:
+        spinner.node.destroy_client(client)
+
+
+def set_parameter(spinner: Spinner, node: str, name: str, value, procs: tuple[NodeProcess, ...]) -> tuple[bool, str]:
+    """What `ros2 param set` does: (successful, reason)."""
+    req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+    resp = spinner.call(SetParameters, f"{node}/set_parameters", req, timeout=START_TIMEOUT_S, procs=procs)
+    return resp.results[0].successful, resp.results[0].reason
+
+
+def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
+    out, driver_file = tmp_path / "out", tmp_path / "driver.yaml"
+    topics = ["-r", "amplitude:=/tof/amplitude", "-r", "depth:=/tof/depth", "-r", "camera_info:=/tof/camera_info"]
+    simulator = launch("tof_sim_node", *topics, "-r", "set_camera_info:=/tof/set_camera_info",
+                       "-p", "board.cols:=5", "-p", "board.rows:=7", "-p", "board.square:=0.03",
+                       "-p", f"calibration_file:={driver_file}")
+    node = launch("calibration_node", *topics, "-p", "set_camera_info_service:=/tof/set_camera_info",
+                  "-p", "board.cols:=5", "-p", "board.rows:=7", "-p", "board.square:=0.03",
+                  "-p", "views.min:=8", "-p", "views.max:=16", "-p", f"output_dir:={out}")
+    procs = (simulator, node)
+
+    # Calibrate as a user would: ask until enough views are in; a refusal says why.
+    deadline = time.monotonic() + CALIBRATE_TIMEOUT_S
+    answers = []
+    while True:
+        resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
+        answers.append(resp.message)
+        if resp.success:
+            break
+        assert resp.message, "a refused calibration must say why"
+        if time.monotonic() > deadline:
+            pytest.fail(f"no calibration within {CALIBRATE_TIMEOUT_S:g} s; answers:\n" + "\n".join(answers)
+                        + "\n" + logs(*procs))
+        time.sleep(1.0)
+    assert "fx=" in resp.message and "views used" in resp.message, resp.message
+
+    # Latched: a subscriber that comes after the calibration still gets it.
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    infos: list[CameraInfo] = []
+    spinner.node.create_subscription(CameraInfo, "/calibration_node/camera_info", infos.append, latched)
+    info = wait_until(lambda: infos and infos[-1], 15.0, "the latched CameraInfo", *procs)
+    truth = sim.pmd_camera()
+    K = np.reshape(info.k, (3, 3))
+    assert (info.width, info.height) == (truth.width, truth.height)
+    assert info.distortion_model == "plumb_bob" and len(info.d) == 5
+    assert K[0, 0] == pytest.approx(truth.K[0, 0], rel=0.01) and K[1, 1] == pytest.approx(truth.K[1, 1], rel=0.01)
+    assert abs(K[0, 2] - truth.K[0, 2]) < 2.0 and abs(K[1, 2] - truth.K[1, 2]) < 2.0, K
+    assert np.allclose(np.reshape(info.p, (3, 4))[:, :3], K)
+
+    saved = read_camera_yaml(out / "calibration.yaml")
+    assert np.allclose(saved.K, K, rtol=1e-12) and (saved.width, saved.height) == (info.width, info.height)
+    report = json.loads((out / "calibration.json").read_text())
+    assert report["verdict"]["ok"] is True
+    assert report["board"] == {"cols": 5, "rows": 7, "square_m": 0.03}, report["board"]
+    assert report["topics"] == {"amplitude": "/tof/amplitude", "depth": "/tof/depth"}, report["topics"]
+    n_views = len(list((out / "views").glob("*_ir.png")))
+    assert n_views >= 8 and len(list((out / "views").glob("*_depth.png"))) == n_views
+
+    # Two calibrations at once: both answered; one may be turned away, saying so.
+    for resp in call_together(spinner, "/calibration_node/calibrate", 2, 60.0, *procs):
+        assert resp.success or "already running" in resp.message, resp.message
+
+    # A calibration that cannot be saved is refused with the reason; the node lives on.
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert set_parameter(spinner, "/calibration_node", "output_dir", str(blocker / "out"), procs) == (True, "")
+    resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=60.0, procs=procs)
+    assert not resp.success and "not saved" in resp.message and str(blocker) in resp.message, resp.message
+    assert set_parameter(spinner, "/calibration_node", "output_dir", str(out), procs) == (True, "")
+
+    # Commit: the driver's set_camera_info gets the calibration and answers for it.
+    resp = spinner.call(Trigger, "/calibration_node/commit", timeout=30.0, procs=procs)
+    assert resp.success, resp.message + "\n" + logs(*procs)
+    assert resp.message.startswith("/tof/set_camera_info: ") and str(driver_file) in resp.message, resp.message
+    stored = read_camera_yaml(driver_file)
+    assert np.allclose(stored.K, read_camera_yaml(out / "calibration.yaml").K, rtol=1e-12)
+
+    resp = spinner.call(Trigger, "/calibration_node/reset", timeout=10.0, procs=procs)
+    assert resp.success and resp.message.startswith("cleared "), resp.message
+    assert int(resp.message.split()[1]) >= 8, resp.message
+    assert node.alive() and simulator.alive()
+
+
+def _image(encoding: str, width: int, height: int, bytes_per_pixel: int, stamp: float, *,
+           data_bytes: int | None = None, step: int | None = None) -> Image:
+    msg = Image(encoding=encoding, width=width, height=height, is_bigendian=0)
+    msg.step = width * bytes_per_pixel if step is None else step
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(stamp), int(round(stamp % 1 * 1e9))
+    msg.header.frame_id = "test_frame"
+    size = msg.step * height if data_bytes is None else data_bytes
+    msg.data = np.random.default_rng(0).integers(0, 256, size, dtype=np.uint8).tobytes()
+    return msg
+
+
+def test_bad_messages_are_reported_not_fatal(launch, spinner):
+    node = launch("calibration_node", "-r", "__ns:=/t2")
+    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=START_TIMEOUT_S, procs=(node,))
+    assert resp.success
+
+    amplitude_pub = spinner.node.create_publisher(Image, "/t2/amplitude", 10)
+    depth_pub = spinner.node.create_publisher(Image, "/t2/depth", 10)
+    wait_until(lambda: amplitude_pub.get_subscription_count() and depth_pub.get_subscription_count(),
+               START_TIMEOUT_S, "the node's image subscriptions", node)
+    latest: list[dict[str, str]] = [{}]   # replaced whole by the spin thread, never half-updated
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for s in msg.status:
+            if s.name.startswith("/t2/calibration_node"):
+                latest[0] = {kv.key: kv.value for kv in s.values}
+
+    spinner.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+
+    w, h = 32, 24
+    cases = [  # (what, amplitude(stamp), depth(stamp), what 'last rejection' must say)
+        ("rgb8 amplitude", lambda t: _image("rgb8", w, h, 3, t), lambda t: _image("16UC1", w, h, 2, t),
+         "unsupported image encoding 'rgb8'"),
+        ("data shorter than step x height", lambda t: _image("mono16", w, h, 2, t, data_bytes=w * h),
+         lambda t: _image("16UC1", w, h, 2, t), "but step x height"),
+        ("step less than a row", lambda t: _image("mono16", w, h, 2, t, step=w),
+         lambda t: _image("16UC1", w, h, 2, t), "is less than width"),
+        ("mono8 depth", lambda t: _image("mono16", w, h, 2, t), lambda t: _image("mono8", w, h, 1, t),
+         "is not a depth encoding"),
+        ("depth of another size", lambda t: _image("mono16", w, h, 2, t),
+         lambda t: _image("16UC1", w + 8, h, 2, t), "differ in size"),
+        ("no board in the image", lambda t: _image("mono16", w, h, 2, t), lambda t: _image("16UC1", w, h, 2, t),
+         "board"),
+    ]
+    stamp = 1000.0
+    for what, amplitude, depth, expected in cases:
+        def rejected() -> bool:
+            nonlocal stamp
+            stamp += 1.0   # a new pair each time: best-effort delivery may lose one
+            amplitude_pub.publish(amplitude(stamp))
+            depth_pub.publish(depth(stamp))
+            return expected in latest[0].get("last rejection", "")
+        wait_until(rejected, 15.0, lambda: f"'{expected}' in the diagnostics' last rejection after {what} "
+                   f"(last seen: {latest[0].get('last rejection')!r})", node, period=0.3)
+
+    # A non-finite float amplitude must not end the worker either; the node then still answers.
+    for _ in range(3):
+        stamp += 1.0
+        nan = _image("32FC1", w, h, 4, stamp)
+        nan.data = np.full(w * h, np.nan, np.float32).tobytes()
+        amplitude_pub.publish(nan)
+        depth_pub.publish(_image("16UC1", w, h, 2, stamp))
+    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=10.0, procs=(node,))
+    assert resp.success and node.alive(), logs(node)
+    status = latest[0]
+    assert status.get("views") == "0" and int(status.get("frames", "0")) >= 1, status
+    wait_until(lambda: "unsupported image encoding 'rgb8'" in node.output(), 5.0,
+               "the rgb8 frame's warning in the log", node)
+
+
+def test_services_answer_and_refuse_with_reasons(launch, spinner):
+    node = launch("calibration_node", "-r", "__ns:=/t3", "-p", "views.min:=5")
+    procs = (node,)
+    resp = spinner.call(Trigger, "/t3/calibration_node/reset", timeout=START_TIMEOUT_S, procs=procs)
+    assert resp.success and resp.message == "cleared 0 views", resp.message
+    resp = spinner.call(Trigger, "/t3/calibration_node/calibrate", timeout=10.0, procs=procs)
+    assert not resp.success and "only 0 views collected, need 5" in resp.message, resp.message
+    resp = spinner.call(Trigger, "/t3/calibration_node/commit", timeout=10.0, procs=procs)
+    assert not resp.success and "nothing to commit" in resp.message, resp.message
+    for resp in call_together(spinner, "/t3/calibration_node/calibrate", 2, 10.0, *procs):
+        assert not resp.success and ("only 0 views" in resp.message or "already running" in resp.message), \
+            resp.message
+    assert node.alive()
+
+
+def test_parameters_are_checked(launch, spinner):
+    node = launch("calibration_node", "-r", "__ns:=/t4")
+    procs = (node,)
+
+    def set_one(name: str, value) -> tuple[bool, str]:
+        return set_parameter(spinner, "/t4/calibration_node", name, value, procs)
+
+    ok, reason = set_one("depth.convention", "disparity")
+    assert not ok and "'z' or 'radial'" in reason, reason
+    ok, reason = set_one("board.cols", 6)
+    assert not ok and "read-only" in reason, reason
+    ok, reason = set_one("camera_name", "tof-camera")
+    assert not ok and "camera_name" in reason, reason
+    ok, reason = set_one("views.min", 100)       # views.max is 60
+    assert not ok and "views.max" in reason, reason
+    ok, reason = set_one("depth.convention", "radial")
+    assert ok, reason
+    ok, reason = set_one("sync.slop", 0.05)
+    assert ok, reason
+    assert node.alive()
+
+    # The same check refuses a bad value given at start-up, with the reason, not at calibration.
+    bad = launch("calibration_node", "-r", "__ns:=/t4b", "-p", "depth.convention:=disparity")
+    wait_until(lambda: not bad.alive(), START_TIMEOUT_S, "the node to refuse depth.convention:=disparity")
+    assert bad.proc.returncode == 1 and "'z' or 'radial'" in bad.output(), logs(bad)

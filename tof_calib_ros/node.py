@@ -1,0 +1,401 @@
+"""The calibration node: collects views from a ToF camera's amplitude and depth topics,
+calibrates on request, publishes the CameraInfo and commits it to the driver.
+
+    ros2 run tof_calib_ros calibration_node --ros-args \\
+        -r amplitude:=/tof/amplitude/image_raw -r depth:=/tof/depth/image_raw \\
+        -p board.cols:=5 -p board.rows:=7 -p board.square:=0.03
+
+Threads: subscriptions only pair frames and queue them (two deep, the oldest dropped), so the
+executor never falls behind the camera; one worker thread detects boards and collects views;
+services run in their own callback group, so a calibration never blocks the topics.
+"""
+from __future__ import annotations
+
+import re
+import threading
+import time
+import traceback
+from collections import deque
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.srv import SetCameraInfo
+from std_srvs.srv import Trigger
+
+from . import Board, CalibrationError, CalibrationResult, calibrate
+from .calibration_file import save_views, write_camera_yaml, write_json
+from .collector import CollectorConfig, ViewCollector
+from .image_decode import ImageError, decode_image, depth_to_metres
+from .stamp_sync import StampSync
+
+COMMIT_TIMEOUT_S = 5.0
+WARN_PERIOD_S = 5.0
+# camera_info_manager (and so write_camera_yaml) accepts no other camera name
+CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
+
+
+def _descriptor(text: str, read_only: bool = False, ints: tuple[int, int] | None = None,
+                floats: tuple[float, float] | None = None) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text, read_only=read_only)
+    if ints:
+        d.integer_range = [IntegerRange(from_value=ints[0], to_value=ints[1], step=1)]
+    if floats:
+        d.floating_point_range = [FloatingPointRange(from_value=floats[0], to_value=floats[1], step=0.0)]
+    return d
+
+
+# name: (default, descriptor). Board and QoS changes need a restart: they are read-only.
+PARAMETERS = {
+    "board.cols": (5, _descriptor("interior corners per row (as camera_calibration counts them)", True, (2, 100))),
+    "board.rows": (7, _descriptor("interior corners per column", True, (2, 100))),
+    "board.square": (0.03, _descriptor("square size, metres", True, floats=(0.001, 1.0))),
+    "depth.convention": ("z", _descriptor("'z' (REP 118, along the optical axis) or 'radial' (raw PMD)")),
+    "depth.scale": (0.001, _descriptor("metres per unit of 16UC1 depth (0.001: millimetres)",
+                                       floats=(1e-6, 10.0))),
+    "sync.slop": (0.02, _descriptor("largest stamp difference of a paired amplitude and depth frame, s",
+                                    floats=(0.0, 1.0))),
+    "views.min": (8, _descriptor("views needed before calibrating", ints=(3, 1000))),
+    "views.max": (60, _descriptor("views kept at most (memory stays bounded)", True, (3, 1000))),
+    "camera_name": ("tof_camera", _descriptor("camera_name written into the calibration file")),
+    "output_dir": ("~/.ros/tof_calib", _descriptor("where calibration.yaml, calibration.json and views/ go")),
+    "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",
+                                                               True)),
+    "qos.reliable": (False, _descriptor("subscribe reliably instead of best effort (sensor data)", True)),
+}
+
+
+class _RateLimitedLog:
+    """One warning per distinct message per period: a bad stream must not flood the log."""
+
+    def __init__(self, logger, period: float):
+        self._logger, self._period, self._last = logger, period, {}
+
+    def warn(self, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last.get(text, -1e9) >= self._period:
+            self._last[text] = now
+            self._logger.warning(text)
+
+
+class CalibrationNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("calibration_node", **kwargs)
+        # Registered first, so a bad -p override fails at declaration with the same reason a
+        # bad set_parameters call gets, instead of at the first calibration.
+        self.add_on_set_parameters_callback(self._check_parameters)
+        for name, (default, desc) in PARAMETERS.items():
+            self.declare_parameter(name, default, desc)
+        p = self._param
+        self.board = Board(p("board.cols"), p("board.rows"), p("board.square"))
+        self.collector = ViewCollector(self.board, CollectorConfig(max_views=p("views.max"),
+                                                                   min_views=p("views.min")))
+        self.sync = StampSync(p("sync.slop"))
+        self._sync_lock = threading.Lock()     # the topics pair frames while ~/reset clears them
+        self._warn = _RateLimitedLog(self.get_logger(), WARN_PERIOD_S)
+        self._lock = threading.Lock()          # the collector and the counters
+        self._frames: deque = deque(maxlen=2)  # paired frames waiting for the worker
+        self._wake = threading.Condition()
+        self._calibrating = threading.Lock()
+        self._stop = False
+        self._generation = 0                   # counts resets: a frame from before one is not collected
+        self.result: CalibrationResult | None = None
+        self.driver_info: CameraInfo | None = None
+        self.frame_id = ""
+        self.dropped = 0
+        self.last_problem = ""
+
+        qos = qos_profile_sensor_data
+        if p("qos.reliable"):
+            qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
+        topics = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Image, "amplitude", lambda m: self._on_image(0, m), qos, callback_group=topics)
+        self.create_subscription(Image, "depth", lambda m: self._on_image(1, m), qos, callback_group=topics)
+        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, qos, callback_group=topics)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.info_pub = self.create_publisher(CameraInfo, "~/camera_info", latched)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        services = ReentrantCallbackGroup()
+        self.create_service(Trigger, "~/calibrate", self._on_calibrate, callback_group=services)
+        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        self.create_service(Trigger, "~/commit", self._on_commit, callback_group=services)
+        self.driver = self.create_client(SetCameraInfo, p("set_camera_info_service"), callback_group=services)
+        self.create_timer(1.0, self._publish_diagnostics, callback_group=topics)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._worker = threading.Thread(target=self._work, name="view_collector", daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f"collecting views of a {self.board.cols}x{self.board.rows} board ({self.board.square * 1e3:g} mm) "
+            f"from '{self.resolve_topic_name('amplitude')}' and '{self.resolve_topic_name('depth')}'")
+
+    def _param(self, name: str):
+        return self.get_parameter(name).value
+
+    def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """Only checks (it also runs at declaration, before the node is built); a rejected
+        value must not touch the node, so ``_apply_parameters`` applies them afterwards."""
+        new = {prm.name: prm.value for prm in params}
+
+        def value(name: str):
+            return new[name] if name in new else self.get_parameter_or(name).value
+
+        for name, v in new.items():
+            reason = None
+            if name == "depth.convention" and v not in ("z", "radial"):
+                reason = f"depth.convention must be 'z' or 'radial', not {v!r}"
+            elif name == "camera_name" and not (isinstance(v, str) and CAMERA_NAME.fullmatch(v)):
+                reason = (f"camera_name must be letters, digits and '_' (camera_info_manager refuses "
+                          f"anything else), not {v!r}")
+            elif name == "output_dir" and not str(v).strip():
+                reason = "output_dir must not be empty"
+            elif name in ("views.min", "views.max"):
+                lo, hi = value("views.min"), value("views.max")
+                if lo is not None and hi is not None and lo > hi:
+                    reason = f"views.min ({lo}) must not exceed views.max ({hi}): calibration could never start"
+            if reason:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """What changes take effect beyond being read when used (the others are read per frame
+        or per calibration)."""
+        for prm in params:
+            if prm.name == "sync.slop":
+                with self._sync_lock:
+                    self.sync.slop = float(prm.value)
+            elif prm.name == "views.min":
+                with self._lock:   # the diagnostics' good_enough follows it
+                    self.collector.config = replace(self.collector.config, min_views=int(prm.value))
+
+    # -- topics ------------------------------------------------------------------------------
+    def _on_image(self, stream: int, msg: Image) -> None:
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        with self._sync_lock:
+            pair = self.sync.add(stream, stamp, msg)
+        if pair is None:
+            return
+        with self._wake:
+            if len(self._frames) == self._frames.maxlen:
+                self.dropped += 1
+            self._frames.append(pair)
+            self._wake.notify()
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        self.driver_info = msg
+
+    def _work(self) -> None:
+        while True:
+            with self._wake:
+                while not self._frames and not self._stop:
+                    self._wake.wait()
+                if self._stop:
+                    return
+                amplitude_msg, depth_msg = self._frames.popleft()
+                generation = self._generation
+            try:
+                self._collect(amplitude_msg, depth_msg, generation)
+            except Exception as exc:  # noqa: BLE001 - a bad frame must never end the worker
+                self._problem(f"frame skipped: {exc}")
+
+    def _collect(self, amplitude_msg: Image, depth_msg: Image, generation: int) -> None:
+        try:
+            amplitude = decode_image(amplitude_msg)
+            depth = depth_to_metres(decode_image(depth_msg), depth_msg.encoding, self._param("depth.scale"))
+        except ImageError as exc:
+            self._problem(f"frame skipped: {exc}")
+            return
+        if amplitude.shape != depth.shape:
+            self._problem(f"frame skipped: amplitude {amplitude.shape[1]}x{amplitude.shape[0]} and depth "
+                          f"{depth.shape[1]}x{depth.shape[0]} differ in size")
+            return
+        info = self.driver_info
+        if info is not None and (info.width, info.height) not in ((0, 0), (depth.shape[1], depth.shape[0])):
+            self._problem(f"frame skipped: images are {depth.shape[1]}x{depth.shape[0]} but camera_info says "
+                          f"{info.width}x{info.height}")
+            return
+        self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
+        stamp = depth_msg.header.stamp.sec + depth_msg.header.stamp.nanosec * 1e-9
+        with self._lock:
+            if generation != self._generation:
+                return
+            outcome = self.collector.add(amplitude, depth, stamp)
+            count = len(self.collector.views)
+        if outcome.accepted:
+            self.get_logger().info(f"accepted view {count}: {outcome.reason}")
+        else:
+            self.last_problem = outcome.reason
+
+    def _problem(self, text: str) -> None:
+        self.last_problem = text
+        self._warn.warn(text)
+
+    # -- services ----------------------------------------------------------------------------
+    def _on_calibrate(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        if not self._calibrating.acquire(blocking=False):
+            resp.success, resp.message = False, "a calibration is already running; call again when it is done"
+            return resp
+        try:
+            with self._lock:
+                views = list(self.collector.views)
+            need = self._param("views.min")
+            if len(views) < need:
+                resp.success = False
+                resp.message = (f"only {len(views)} views collected, need {need}: move the board to new "
+                                f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
+                return resp
+            t0 = time.monotonic()
+            try:
+                result = calibrate(views, self.board, (views[0].depth.shape[1], views[0].depth.shape[0]),
+                                   self._param("depth.convention"))
+            except CalibrationError as exc:
+                resp.success, resp.message = False, f"calibration failed: {exc}"
+                return resp
+            except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
+                self.get_logger().error(f"calibration raised {exc!r}:\n{traceback.format_exc()}")
+                resp.success, resp.message = False, f"calibration failed (internal error): {exc!r}"
+                return resp
+            if not result.ok:
+                resp.success = False
+                resp.message = "calibration not trusted, nothing published or written: " + "; ".join(result.verdict)
+                return resp
+            try:
+                self._write(result, views)
+            except (CalibrationError, OSError) as exc:   # output_dir unwritable or not a directory, disk full
+                resp.success = False
+                resp.message = f"calibrated but not saved, nothing published: {exc}"
+                return resp
+            self.result = result
+            self.info_pub.publish(self.camera_info(result))
+            resp.success, resp.message = True, self._summary(result, len(views), time.monotonic() - t0)
+            self.get_logger().info(resp.message)
+            return resp
+        finally:
+            self._calibrating.release()
+
+    def _write(self, result: CalibrationResult, views) -> None:
+        out = Path(str(self._param("output_dir"))).expanduser()
+        out.mkdir(parents=True, exist_ok=True)
+        save_views(out / "views", views)
+        # what it takes to recalibrate from views/ or to trace the result back to its source
+        b = self.board
+        extra = {"board": {"cols": b.cols, "rows": b.rows, "square_m": b.square},
+                 "camera_name": self._param("camera_name"), "frame_id": self.frame_id,
+                 "topics": {"amplitude": self.resolve_topic_name("amplitude"),
+                            "depth": self.resolve_topic_name("depth")}}
+        write_json(out / "calibration.json", result, extra)
+        write_camera_yaml(out / "calibration.yaml", result, self._param("camera_name"))
+
+    @staticmethod
+    def _summary(result: CalibrationResult, n_views: int, seconds: float) -> str:
+        s = result.std
+        return (f"fx={result.K[0, 0]:.2f}±{s['fx']:.2f} fy={result.K[1, 1]:.2f}±{s['fy']:.2f} "
+                f"cx={result.K[0, 2]:.2f}±{s['cx']:.2f} cy={result.K[1, 2]:.2f}±{s['cy']:.2f} px; "
+                f"pixel RMS {result.pixel_rms:.3f} px, depth RMS {result.depth_rms * 1e3:.2f} mm, "
+                f"depth offset {result.depth_offset * 1e3:.1f} mm; {len(result.views)} of {n_views} views "
+                f"used; {seconds:.1f} s")
+
+    def camera_info(self, result: CalibrationResult) -> CameraInfo:
+        msg = CameraInfo()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.frame_id
+        msg.width, msg.height = int(result.image_size[0]), int(result.image_size[1])
+        msg.distortion_model = "plumb_bob"
+        msg.d = [float(x) for x in result.D]
+        msg.k = [float(x) for x in result.K.ravel()]
+        msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+        msg.p = [float(x) for x in np.hstack([result.K, np.zeros((3, 1))]).ravel()]
+        return msg
+
+    def _on_reset(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        with self._sync_lock:
+            self.sync.clear()
+        with self._lock, self._wake:   # frames paired before the reset are not to be collected after it
+            self._frames.clear()
+            self._generation += 1
+            n = len(self.collector.views)
+            self.collector.reset()
+        self.last_problem = ""
+        resp.success, resp.message = True, f"cleared {n} views"
+        return resp
+
+    def _on_commit(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        if self.result is None:
+            resp.success, resp.message = False, "nothing to commit: call ~/calibrate first"
+            return resp
+        name = self.driver.srv_name
+        if not self.driver.wait_for_service(timeout_sec=2.0):
+            resp.success, resp.message = False, f"the driver's service {name} is not available"
+            return resp
+        done = threading.Event()
+        future = self.driver.call_async(SetCameraInfo.Request(camera_info=self.camera_info(self.result)))
+        future.add_done_callback(lambda _f: done.set())
+        if not done.wait(COMMIT_TIMEOUT_S):
+            future.cancel()
+            resp.success, resp.message = False, f"{name} did not answer within {COMMIT_TIMEOUT_S:g} s"
+            return resp
+        reply = future.result()
+        resp.success = bool(reply.success)
+        resp.message = f"{name}: {reply.status_message}"
+        return resp
+
+    # -- progress ----------------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        with self._lock:
+            progress = self.collector.progress()
+        # the fully qualified name tells two cameras' calibration nodes apart
+        status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: view collection",
+                                  hardware_id=self.frame_id)
+        status.level = DiagnosticStatus.OK if progress["good_enough"] else DiagnosticStatus.WARN
+        status.message = "enough views to calibrate" if progress["good_enough"] else "collecting views"
+        values = {k: v for k, v in progress.items() if not isinstance(v, dict)}
+        values.update({f"coverage.{k}": a["progress"] for k, a in progress["axes"].items()})
+        values["frames dropped (worker busy)"] = self.dropped
+        values["last rejection"] = self.last_problem
+        status.values = [KeyValue(key=str(k), value=f"{v:.2f}" if isinstance(v, float) else str(v))
+                         for k, v in values.items()]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        with self._wake:
+            self._stop = True
+            self._wake.notify()
+        self._worker.join(timeout=2.0)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    try:
+        node = CalibrationNode()
+    except (InvalidParameterValueException, InvalidParameterTypeException, CalibrationError) as exc:
+        # a bad -p override: say which and why, without a traceback
+        rclpy.logging.get_logger("calibration_node").fatal(str(exc))
+        rclpy.try_shutdown()
+        return 1
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
