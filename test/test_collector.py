@@ -166,3 +166,15 @@ def test_collected_views_calibrate_the_camera():
     assert len(col.views) >= 15
     res = calibrate(col.views, BOARD)
     assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
+
+
+def test_kept_views_hold_the_accurate_corners():
+    from tof_calib_ros.core.detection import detect_corners
+
+    rng = np.random.default_rng(12)
+    (rvec, tvec), = sim.random_poses(CAM, BOARD, 1, rng, distance=(0.6, 0.7), max_tilt_deg=20)
+    frame = sim.render(CAM, BOARD, rvec, tvec, rng=rng, gain=0.2)
+    col = ViewCollector(BOARD)
+    col.add(frame.amplitude, frame.depth, 0.0)
+    assert col.add(frame.amplitude, frame.depth, 0.05).accepted
+    np.testing.assert_array_equal(col.views[0].corners, detect_corners(frame.amplitude, BOARD))

@@ -197,3 +197,16 @@ def test_tone_map_float_with_nan_and_inf():
     assert out.dtype == np.uint8
     assert out[0, 0] == 0 and out[1, 1] == 0 and out[2, 2] == 0
     assert out[-1, -1] == 255 and out[0, 1] < 5
+
+
+def test_quick_corners_agree_with_the_accurate_ones_in_the_same_order():
+    from tof_calib_ros.core.detection import locate
+
+    cam = sim.pmd_camera()
+    rng = np.random.default_rng(11)
+    for rvec, tvec in sim.random_poses(cam, SIM_BOARD, 6, rng, distance=(0.5, 0.8), max_tilt_deg=35):
+        frame = sim.render(cam, SIM_BOARD, rvec, tvec, rng=rng, gain=0.2)
+        quick, accurate = locate(frame.amplitude, SIM_BOARD).corners, detect_corners(frame.amplitude, SIM_BOARD)
+        assert quick is not None and accurate is not None
+        assert np.sqrt(np.mean(np.sum((quick - accurate) ** 2, axis=1))) < 0.5
+    assert locate(np.zeros((200, 200), np.uint8) + np.arange(200, dtype=np.uint8), SIM_BOARD).corners is None

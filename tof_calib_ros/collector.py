@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from .core.board import Board
-from .core.detection import Detection, detect
+from .core.detection import Detection, detect, locate
 from .core.errors import CalibrationError
 from .core.pipeline import View, depth_in_metres
 from .core.planarize import sample_depth
@@ -38,6 +38,8 @@ _FROM_ZERO = {"size", "skew", "tilt"}
 # The outline checked against the image border lies this many squares beyond the outer corners:
 # a corner is located from the squares around it, so those must be in the image too.
 EDGE_SQUARES = 0.5
+# The quick corners are pixel-accurate; farther from the accurate ones, one of them is wrong.
+QUICK_AGREEMENT_PX = 1.5
 
 
 @dataclass(frozen=True)
@@ -150,7 +152,7 @@ class ViewCollector:
             return Outcome(False, f"image is {w}x{h} but the kept views are {self._size[0]}x{self._size[1]}; "
                                   "reset the collector to start over at the new size")
         try:
-            found = detect(amplitude, self.board)
+            found = locate(amplitude, self.board)
         except CalibrationError as exc:  # a blank or constant frame
             found = Detection(None, str(exc))
         previous, self._previous = self._previous, None
@@ -180,6 +182,15 @@ class ViewCollector:
                                       f"{cfg.min_distance:g}): move, turn or tilt the board", params, corners)
         if len(self._views) >= cfg.max_views:
             return Outcome(False, f"view limit reached ({cfg.max_views} views kept)", params, corners)
+        # Worth keeping: now the accurate corners, which must agree with the quick ones.
+        accurate = detect(amplitude, self.board)
+        if accurate.corners is None:
+            return Outcome(False, f"board lost by the accurate detector: {accurate.message}", params, corners)
+        offset = float(np.sqrt(np.mean(np.sum((accurate.corners - corners) ** 2, axis=1))))
+        if offset > QUICK_AGREEMENT_PX:
+            return Outcome(False, f"the quick and accurate detections disagree by {offset:.1f} px RMS", params,
+                           corners)
+        corners = accurate.corners
         self._views.append(View(depth=depth.astype(np.float32), corners=corners.copy(),
                                 amplitude=amplitude.copy()))
         self._params.append(params)

@@ -127,6 +127,16 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     return Detection(None, f"no {board.cols}x{board.rows} board found: " + "; ".join(reasons))
 
 
+def locate(image: np.ndarray, board: Board) -> Detection:
+    """Quick corners (the SB detector's plain mode on the image as it is, a few ms), in Board
+    order: enough to judge a frame's pose, motion and novelty. A live stream cannot afford
+    ``detect`` (tens of ms) on every frame, only on the frames worth keeping."""
+    found, pts = cv2.findChessboardCornersSB(tone_map(image), board.pattern_size, flags=0)
+    if not found or pts is None or len(pts) != board.n_corners:
+        return Detection(None, f"no {board.cols}x{board.rows} board found")
+    return Detection(_normalise_order(pts.reshape(-1, 2).astype(np.float64), board), "found by the quick check")
+
+
 def detect_corners(image: np.ndarray, board: Board, *, refine: bool = True) -> np.ndarray | None:
     """(N, 2) float64 corner pixels in Board order, or None when no trustworthy board is seen.
 
