@@ -19,10 +19,11 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
     ] + launchers,
-    install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl", "PyYAML"],
+    install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl", "PyYAML",
+                      "rosbags", "matplotlib", "tqdm", "psutil"],
     extras_require={
         "ros": ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"],
-        "test": ["pytest"],
+        "test": ["pytest", "hypothesis"],
     },
     python_requires=">=3.10",
     zip_safe=True,

@@ -275,3 +275,22 @@ def test_parameters_are_checked(launch, spinner):
     bad = launch("calibration_node", "-r", "__ns:=/t4b", "-p", "depth.convention:=disparity")
     wait_until(lambda: not bad.alive(), START_TIMEOUT_S, "the node to refuse depth.convention:=disparity")
     assert bad.proc.returncode == 1 and "'z' or 'radial'" in bad.output(), logs(bad)
+
+
+def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
+    """README command 1, as a user runs it."""
+    import subprocess
+    import sys
+
+    env, _ = ros
+    env = {k: v for k, v in env.items() if k != "ROS_DOMAIN_ID"}   # the demo picks its own
+    run = subprocess.run([sys.executable, "-m", "tof_calib_ros.demo", "--views", "10", "--output", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300, env=env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    rows = {line.split()[0]: line.split() for line in run.stdout.splitlines() if line[:2] in ("fx", "fy")}
+    truth = sim.pmd_camera().K
+    assert float(rows["fx"][3]) == pytest.approx(truth[0, 0], rel=0.01), run.stdout
+    assert float(rows["fy"][3]) == pytest.approx(truth[1, 1], rel=0.01), run.stdout
+    assert "the driver now holds the calibration: True" in run.stdout
+    assert np.allclose(read_camera_yaml(tmp_path / "driver_camera_info.yaml").K,
+                       read_camera_yaml(tmp_path / "calibration.yaml").K)

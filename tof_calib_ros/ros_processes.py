@@ -1,0 +1,170 @@
+"""Starting the package's nodes as `ros2 run` would, and calling them as `ros2 service call` does.
+
+A venv made from the PyPI wheels has neither the ros2 CLI nor launch, so the demo, the tests and
+the benchmarks do what those do: find the executable in <prefix>/lib/tof_calib_ros through the
+ament index, pass --ros-args, and talk to the node from an rclpy node spun in a thread. Every
+process of a run shares one ROS_DOMAIN_ID, with discovery limited to this machine, so runs
+neither see each other nor put DDS traffic on the network.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+PACKAGE = "tof_calib_ros"
+STOP_TIMEOUT_S = 10.0
+
+
+class RosProcessError(RuntimeError):
+    """A node could not be started, or did not answer in time."""
+
+
+def ros_environment(domain_id: int | None = None) -> dict[str, str]:
+    """Set and return the ROS environment of this run; call before rclpy.init.
+
+    The domain comes from the pid (1..100) unless given, so concurrent runs on one machine rarely
+    share one; AMENT_PREFIX_PATH gets this interpreter's prefix, as sourcing a ROS install would.
+    """
+    env = os.environ
+    env["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100 if domain_id is None else domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_LOCALHOST_ONLY", None)       # deprecated; with the above it only warns
+    prefixes = [p for p in env.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    if sys.prefix not in prefixes:
+        env["AMENT_PREFIX_PATH"] = os.pathsep.join([sys.prefix, *prefixes])
+    env["PYTHONUNBUFFERED"] = "1"
+    env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
+    return dict(env)
+
+
+class NotInstalled(RosProcessError):
+    """The package is not in the ament index: an editable install registers nothing there."""
+
+
+def executable(name: str) -> Path:
+    """<prefix>/lib/tof_calib_ros/<name>, where `ros2 run tof_calib_ros <name>` finds it."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    try:
+        prefix = get_package_prefix(PACKAGE)
+    except PackageNotFoundError:
+        raise NotInstalled(
+            f"{PACKAGE} is not in the ament index under AMENT_PREFIX_PATH={os.environ.get('AMENT_PREFIX_PATH')} "
+            "(an editable install registers nothing there): install it with pip install .[ros] "
+            "(tools/setup_venv.sh does), or build it with colcon and source install/setup.bash") from None
+    path = Path(prefix) / "lib" / PACKAGE / name
+    if not (path.is_file() and os.access(path, os.X_OK)):
+        raise RosProcessError(f"{PACKAGE} is installed in {prefix} but {path} is missing or not executable: "
+                              "'ros2 run' could not start it (check the launchers in setup.py's data_files)")
+    return path
+
+
+class NodeProcess:
+    """One node started as `ros2 run` would; its stdout and stderr go to a file under ``logdir``."""
+
+    def __init__(self, name: str, args: list[str], logdir: Path, env: dict[str, str]):
+        self.name = name
+        # one file per process: a second node of the same name must not truncate the first's
+        self.log = next(path for k in range(1, 1000)
+                        if not (path := logdir / f"{name}{'' if k == 1 else f'.{k}'}.log").exists())
+        cmd = [str(executable(name)), "--ros-args", *args]
+        env = dict(env, ROS_LOG_DIR=str(logdir / "ros_log"))
+        with open(self.log, "wb") as out:
+            out.write(("$ " + " ".join(cmd) + "\n").encode())
+            out.flush()
+            # its own process group: SIGINT from the terminal reaches the caller alone, which
+            # decides when the node stops
+            self.proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env,
+                                         start_new_session=True)
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def tail(self, lines: int = 40) -> str:
+        text = self.output().splitlines()[-lines:]
+        return f"--- {self.name} (exit code {self.proc.poll()}), last {len(text)} lines:\n" + "\n".join(text)
+
+    def stop(self) -> int | None:
+        """SIGINT (a node's clean shutdown), then SIGKILL if it does not end in time."""
+        if self.alive():
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(STOP_TIMEOUT_S)
+        return self.proc.returncode
+
+
+def logs(*procs: NodeProcess) -> str:
+    return "\n".join(p.tail() for p in procs)
+
+
+class Spinner:
+    """An rclpy node of this process, spun in a background thread so futures complete and
+    messages arrive while the caller waits."""
+
+    def __init__(self, context: Any, name: str):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.node = rclpy.create_node(name, context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name=f"spin {name}", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            self.executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    def call(self, srv_type: Any, name: str, request: Any = None, timeout: float = 30.0,
+             procs: tuple[NodeProcess, ...] = ()) -> Any:
+        """Call a service as `ros2 service call` does: wait for it, send, wait for the answer."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise RosProcessError(f"service {name} not available within {timeout:g} s\n" + logs(*procs))
+            future = client.call_async(srv_type.Request() if request is None else request)
+            done = threading.Event()
+            future.add_done_callback(lambda _f: done.set())
+            if not done.wait(timeout):
+                raise RosProcessError(f"service {name} did not answer within {timeout:g} s\n" + logs(*procs))
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=5.0)
+        self.node.destroy_node()
+        self._thread.join(timeout=5.0)
+
+
+def wait_until(condition: Callable[[], Any], timeout: float, what: str | Callable[[], str], *procs: NodeProcess,
+               period: float = 0.05) -> Any:
+    """Poll ``condition`` until it returns something true; raise with ``what`` (or what it returns
+    then, to show the state at that time) and the logs when the time is up or a node ended."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        ended = [p.name for p in procs if not p.alive()]
+        if ended or time.monotonic() > deadline:
+            why = f"{ended[0]} ended" if ended else f"timed out after {timeout:g} s"
+            raise RosProcessError(f"{why} while waiting for {what() if callable(what) else what}\n" + logs(*procs))
+        time.sleep(period)
