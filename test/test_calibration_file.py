@@ -19,6 +19,7 @@ from tof_calib_ros.calibration_file import (
     load_views,
     read_camera_yaml,
     save_views,
+    write_calibration,
     write_camera_yaml,
     write_json,
 )
@@ -327,3 +328,43 @@ def test_load_views_reads_the_kinect_set(kinect_dir: Path) -> None:
     views = load_views(kinect_dir)
     assert len(views) == 51
     assert views[0].depth.dtype == np.uint16 and views[0].amplitude.shape == (424, 512)
+
+
+# --- the whole output ----------------------------------------------------------------------
+
+def _views(n: int, value: int) -> list[View]:
+    return [View(depth=np.full((6, 8), 1000 + i, np.uint16), amplitude=np.full((6, 8), value, np.uint16))
+            for i in range(n)]
+
+
+def test_write_calibration_replaces_the_views_whole(tmp_path: Path) -> None:
+    write_calibration(tmp_path, _result(), _views(5, 7), "tof")
+    assert len(load_views(tmp_path / "views")) == 5
+    path = write_calibration(tmp_path, _result(K * [[2], [2], [1]]), _views(3, 9), "tof")
+    views = load_views(tmp_path / "views")
+    assert len(views) == 3 and all(int(v.amplitude[0, 0]) == 9 for v in views)   # none of the 5 left behind
+    assert path == tmp_path / "calibration.yaml" and read_camera_yaml(path).K[0, 0] == 2 * K[0, 0]
+    assert json.loads((tmp_path / "calibration.json").read_text())["camera_matrix"][0][0] == 2 * K[0, 0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.yaml", "views"]
+
+
+def test_write_calibration_refuses_before_changing_anything(tmp_path: Path) -> None:
+    write_calibration(tmp_path, _result(), _views(2, 7), "tof")
+    before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    with pytest.raises(CalibrationFileError, match="camera name"):
+        write_calibration(tmp_path, _result(K * 2), _views(4, 9), "bad name")
+    no_amplitude = [View(depth=np.ones((6, 8)))]
+    with pytest.raises(CalibrationFileError, match="no amplitude"):
+        write_calibration(tmp_path, _result(K * 2), no_amplitude, "tof")
+    after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    assert after == before
+
+
+def test_write_calibration_cleans_up_after_a_kill_between_the_renames(tmp_path: Path) -> None:
+    write_calibration(tmp_path, _result(), _views(2, 7), "tof")
+    # what a SIGKILL between the two renames leaves: the old views moved aside, the new ones staged
+    (tmp_path / "views").rename(tmp_path / ".views.old.1.x")
+    save_views(tmp_path / ".views.new.1.x", _views(3, 9))
+    write_calibration(tmp_path, _result(), _views(4, 5), "tof")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.yaml", "views"]
+    assert len(load_views(tmp_path / "views")) == 4

@@ -3,8 +3,15 @@ import cv2
 import numpy as np
 import pytest
 
-from tof_calib_ros.core.camera import (depth_of, points_from_depth, project, rays, split_intrinsics, transform,
-                                       undistort_normalized)
+from tof_calib_ros.core.camera import (
+    depth_of,
+    points_from_depth,
+    project,
+    rays,
+    split_intrinsics,
+    transform,
+    undistort_normalized,
+)
 
 PARAMS = np.array([284.4, 280.1, 101.0, 98.0, -0.3, 0.12, 0.001, -0.002, -0.02])
 

@@ -20,10 +20,10 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from ros_helpers import NodeProcess, Spinner, executable, logs, ros_environment, wait_until  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from ros_helpers import NodeProcess, Spinner, executable, logs, ros_environment, wait_until  # noqa: E402
 from tof_calib_ros import sim  # noqa: E402
 from tof_calib_ros.calibration_file import read_camera_yaml  # noqa: E402
 

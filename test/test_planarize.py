@@ -3,8 +3,14 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, CalibrationError, sim
-from tof_calib_ros.core.planarize import (board_samples, corner_depth, fit_samples, planarize, sample_depth,
-                                          white_square_pixels)
+from tof_calib_ros.core.planarize import (
+    board_samples,
+    corner_depth,
+    fit_samples,
+    planarize,
+    sample_depth,
+    white_square_pixels,
+)
 
 BOARD = Board(8, 6, 0.04)
 CAM = sim.pmd_camera()

@@ -11,6 +11,7 @@ import math
 import os
 import re
 import secrets
+import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,11 +114,13 @@ def _intrinsics(source: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
 
 
 def write_camera_yaml(path: str | os.PathLike, source: Any, camera_name: str) -> Path:
-    """Write K and D (from a CalibrationResult, or a mapping with K, D, image_size) for ROS.
+    """Write K and D (from a CalibrationResult, or a mapping with K, D, image_size) for ROS."""
+    return atomic_write(path, _camera_yaml(source, camera_name))
 
-    A monocular camera has R = identity and P = [K | 0]. Floats are written in full (repr),
-    so reading the file back gives the same numbers bit for bit.
-    """
+
+def _camera_yaml(source: Any, camera_name: str) -> bytes:
+    """A monocular camera has R = identity and P = [K | 0]. Floats are written in full (repr),
+    so reading the file back gives the same numbers bit for bit."""
     if not isinstance(camera_name, str) or not _CAMERA_NAME.fullmatch(camera_name):
         raise CalibrationFileError(f"camera name {camera_name!r} must be letters, digits and '_' only "
                                    "(camera_info_manager rejects anything else)")
@@ -134,8 +137,7 @@ def write_camera_yaml(path: str | os.PathLike, source: Any, camera_name: str) ->
     }
     # default_flow_style=None: lists (the data) in flow style, maps in block style, as
     # camera_calibration_parsers writes; an unlimited width keeps each list on one line
-    text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=math.inf)
-    return atomic_write(path, text.encode())
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=math.inf).encode()
 
 
 def _number(value: Any, where: str) -> float:
@@ -308,3 +310,37 @@ def load_views(directory: str | os.PathLike) -> list[View]:
     if not views:
         raise CalibrationFileError(f"{directory}: no NNNN_ir.png views found")
     return views
+
+
+def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence[View], camera_name: str,
+                      extra: Mapping[str, Any] | None = None, depth_units: float | None = None) -> Path:
+    """Write ``views/``, ``calibration.json`` and ``calibration.yaml`` into ``directory``; returns the YAML.
+
+    The YAML goes last, so a driver reading it sees a new calibration only once the views and
+    the report behind it are complete, and everything that can be refused (a bad camera name,
+    a view without amplitude) is refused before the first file changes. ``views/`` is replaced
+    whole, not file by file, so no views of an earlier, larger set stay behind: the new set is
+    written beside it and swapped in by two renames; after a SIGKILL between those two, the
+    next write removes what is left.
+    """
+    out = Path(directory).expanduser()
+    camera_yaml = _camera_yaml(result, camera_name)
+    token = f"{os.getpid()}.{secrets.token_hex(4)}"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for stale in out.glob(".views.*"):
+            shutil.rmtree(stale, ignore_errors=True)
+        staging, current, retired = out / f".views.new.{token}", out / "views", out / f".views.old.{token}"
+        try:
+            save_views(staging, views, depth_units)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        if current.exists():
+            os.rename(current, retired)
+        os.rename(staging, current)
+        shutil.rmtree(retired, ignore_errors=True)
+    except OSError as exc:
+        raise CalibrationFileError(f"cannot write the views into {out}: {exc.strerror or exc}") from exc
+    write_json(out / "calibration.json", result, extra)
+    return atomic_write(out / "calibration.yaml", camera_yaml)

@@ -17,16 +17,15 @@ import time
 import traceback
 from collections import deque
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -34,7 +33,7 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult, calibrate
-from .calibration_file import save_views, write_camera_yaml, write_json
+from .calibration_file import write_calibration
 from .collector import CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .stamp_sync import StampSync
@@ -284,17 +283,13 @@ class CalibrationNode(Node):
             self._calibrating.release()
 
     def _write(self, result: CalibrationResult, views) -> None:
-        out = Path(str(self._param("output_dir"))).expanduser()
-        out.mkdir(parents=True, exist_ok=True)
-        save_views(out / "views", views)
         # what it takes to recalibrate from views/ or to trace the result back to its source
         b = self.board
         extra = {"board": {"cols": b.cols, "rows": b.rows, "square_m": b.square},
                  "camera_name": self._param("camera_name"), "frame_id": self.frame_id,
                  "topics": {"amplitude": self.resolve_topic_name("amplitude"),
                             "depth": self.resolve_topic_name("depth")}}
-        write_json(out / "calibration.json", result, extra)
-        write_camera_yaml(out / "calibration.yaml", result, self._param("camera_name"))
+        write_calibration(str(self._param("output_dir")), result, views, self._param("camera_name"), extra)
 
     @staticmethod
     def _summary(result: CalibrationResult, n_views: int, seconds: float) -> str:
