@@ -2,13 +2,20 @@
 missing from the ament index skips the node tests, a wait that runs out fails the test."""
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tof_calib_ros.ros_processes import (  # noqa: F401
+rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
+
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from tof_calib_ros.ros_processes import (  # noqa: E402, F401
     NodeProcess,
     NotInstalled,
     RosProcessError,
@@ -16,8 +23,10 @@ from tof_calib_ros.ros_processes import (  # noqa: F401
     logs,
     ros_environment,
 )
-from tof_calib_ros.ros_processes import executable as _executable
-from tof_calib_ros.ros_processes import wait_until as _wait_until
+from tof_calib_ros.ros_processes import executable as _executable  # noqa: E402
+from tof_calib_ros.ros_processes import wait_until as _wait_until  # noqa: E402
+
+START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
 
 
 def executable(name: str) -> Path:
@@ -33,3 +42,26 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str | Callabl
         return _wait_until(condition, timeout, what, *procs, period=period)
     except RosProcessError as exc:
         pytest.fail(str(exc))
+
+
+def call_together(spinner: Spinner, name: str, n: int, timeout: float, *procs: NodeProcess) -> list:
+    """n Trigger calls sent at once; every one must be answered."""
+    client = spinner.node.create_client(Trigger, name)
+    try:
+        assert client.wait_for_service(timeout_sec=timeout), f"{name} not available\n" + logs(*procs)
+        futures = [client.call_async(Trigger.Request()) for _ in range(n)]
+        done = [threading.Event() for _ in futures]
+        for f, d in zip(futures, done):
+            f.add_done_callback(lambda _f, d=d: d.set())
+        for d in done:
+            assert d.wait(timeout), f"one of {n} simultaneous calls of {name} was not answered\n" + logs(*procs)
+        return [f.result() for f in futures]
+    finally:
+        spinner.node.destroy_client(client)
+
+
+def set_parameter(spinner: Spinner, node: str, name: str, value, procs: tuple[NodeProcess, ...]) -> tuple[bool, str]:
+    """What `ros2 param set` does: (successful, reason)."""
+    req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+    resp = spinner.call(SetParameters, f"{node}/set_parameters", req, timeout=START_TIMEOUT_S, procs=procs)
+    return resp.results[0].successful, resp.results[0].reason

@@ -8,7 +8,6 @@ namespace of its own where it can, so a slow shutdown in one test never answers 
 from __future__ import annotations
 
 import json
-import threading
 import time
 
 import numpy as np
@@ -17,10 +16,8 @@ import pytest
 rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rcl_interfaces.srv import SetParameters  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from ros_helpers import NodeProcess, Spinner, executable, logs, ros_environment, wait_until  # noqa: E402
+from ros_helpers import START_TIMEOUT_S, call_together, logs, set_parameter, wait_until  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -28,68 +25,6 @@ from tof_calib_ros import sim  # noqa: E402
 from tof_calib_ros.calibration_file import read_camera_yaml  # noqa: E402
 
 CALIBRATE_TIMEOUT_S = 90.0
-START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
-
-
-@pytest.fixture(scope="module")
-def ros():
-    """This run's ROS environment and an rclpy context in it (set up before rclpy.init)."""
-    env = ros_environment()
-    executable("calibration_node")   # skips the module when the package is not installed
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield env, context
-    rclpy.shutdown(context=context)
-
-
-@pytest.fixture
-def launch(ros, tmp_path):
-    """start(name, *ros_args) -> NodeProcess; stopped (SIGINT, then kill) after the test, and
-    their output printed, which pytest shows when the test failed."""
-    env, _ = ros
-    procs: list[NodeProcess] = []
-
-    def start(name: str, *args: str) -> NodeProcess:
-        proc = NodeProcess(name, list(args), tmp_path, env)
-        procs.append(proc)
-        return proc
-
-    yield start
-    for proc in procs:
-        proc.stop()
-    for proc in procs:
-        print(proc.tail(200))
-
-
-@pytest.fixture
-def spinner(ros):
-    _, context = ros
-    s = Spinner(context, "tof_calib_test")
-    yield s
-    s.close()
-
-
-def call_together(spinner: Spinner, name: str, n: int, timeout: float, *procs: NodeProcess) -> list:
-    """n Trigger calls sent at once; every one must be answered."""
-    client = spinner.node.create_client(Trigger, name)
-    try:
-        assert client.wait_for_service(timeout_sec=timeout), f"{name} not available\n" + logs(*procs)
-        futures = [client.call_async(Trigger.Request()) for _ in range(n)]
-        done = [threading.Event() for _ in futures]
-        for f, d in zip(futures, done):
-            f.add_done_callback(lambda _f, d=d: d.set())
-        for d in done:
-            assert d.wait(timeout), f"one of {n} simultaneous calls of {name} was not answered\n" + logs(*procs)
-        return [f.result() for f in futures]
-    finally:
-        spinner.node.destroy_client(client)
-
-
-def set_parameter(spinner: Spinner, node: str, name: str, value, procs: tuple[NodeProcess, ...]) -> tuple[bool, str]:
-    """What `ros2 param set` does: (successful, reason)."""
-    req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
-    resp = spinner.call(SetParameters, f"{node}/set_parameters", req, timeout=START_TIMEOUT_S, procs=procs)
-    return resp.results[0].successful, resp.results[0].reason
 
 
 def test_simulator_calibration_and_commit(launch, spinner, tmp_path):

@@ -1,0 +1,176 @@
+"""The calibration node under faults: a driver that is absent, slow or failing; services called
+while a calibration runs; parameters changed while views are collected; SIGKILL while the
+calibration files are written. Real processes, as in test_node.py.
+
+Defined behaviour (README, "Concurrency and faults"):
+- ~/calibrate while one runs: answered at once, "already running".
+- ~/reset while a calibration runs: the views are cleared for the next one; the running one
+  finishes with the views it started with and is published.
+- a parameter changed while collecting applies from the next frame (depth.scale, sync.slop) or
+  the next calibration (depth.convention, views.min); views already kept stay.
+- ~/commit: the driver absent, slow (over 5 s) or refusing is reported; the node goes on.
+- SIGKILL at any moment leaves the previous calibration files whole.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
+
+from ros_helpers import START_TIMEOUT_S, Spinner, logs, set_parameter, wait_until  # noqa: E402
+from sensor_msgs.srv import SetCameraInfo  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from tof_calib_ros.calibration_file import load_views, read_camera_yaml  # noqa: E402
+
+COLLECT_TIMEOUT_S = 90.0
+BOARD = ("-p", "board.cols:=5", "-p", "board.rows:=7", "-p", "board.square:=0.03")
+
+
+def _start(launch, ns: str, out: Path, *node_args: str):
+    simulator = launch("tof_sim_node", "-r", f"__ns:={ns}", *BOARD, "-p", "rate:=20.0")
+    node = launch("calibration_node", "-r", f"__ns:={ns}", *BOARD, "-p", "views.min:=8",
+                  "-p", f"output_dir:={out}", *node_args)
+    return simulator, node
+
+
+def _calibrate_when_ready(spinner: Spinner, ns: str, procs) -> Trigger.Response:
+    deadline = time.monotonic() + COLLECT_TIMEOUT_S
+    while True:
+        resp = spinner.call(Trigger, f"{ns}/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
+        if resp.success:
+            return resp
+        assert "views collected" in resp.message, resp.message + "\n" + logs(*procs)
+        if time.monotonic() > deadline:
+            pytest.fail(f"no calibration within {COLLECT_TIMEOUT_S:g} s: {resp.message}\n" + logs(*procs))
+        time.sleep(0.5)
+
+
+def _call_async(spinner: Spinner, name: str):
+    """Send a Trigger call now; returns wait() -> response."""
+    client = spinner.node.create_client(Trigger, name)
+    assert client.wait_for_service(timeout_sec=START_TIMEOUT_S), name
+    future, done = client.call_async(Trigger.Request()), threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+
+    def wait(timeout: float = 60.0):
+        assert done.wait(timeout), f"{name} did not answer within {timeout:g} s"
+        return future.result()
+    return wait
+
+
+def test_commit_reports_an_absent_failing_or_slow_driver(launch, spinner, ros, tmp_path):
+    ns = "/f1"
+    procs = _start(launch, ns, tmp_path / "out", "-p", f"set_camera_info_service:={ns}/fake_driver")
+    _calibrate_when_ready(spinner, ns, procs)
+    commit = f"{ns}/calibration_node/commit"
+
+    resp = spinner.call(Trigger, commit, timeout=30.0, procs=procs)
+    assert not resp.success and resp.message == f"the driver's service {ns}/fake_driver is not available"
+
+    behaviour = {"mode": "refuse"}
+    received: list = []
+
+    def driver(req: SetCameraInfo.Request, out: SetCameraInfo.Response) -> SetCameraInfo.Response:
+        received.append(req.camera_info)
+        if behaviour["mode"] == "slow":
+            time.sleep(8.0)
+        out.success = behaviour["mode"] == "ok"
+        out.status_message = {"refuse": "disk full: calibration not stored", "slow": "late",
+                              "ok": "stored"}[behaviour["mode"]]
+        return out
+
+    _, context = ros
+    fake = Spinner(context, "fake_driver")   # its own executor: a slow answer blocks only itself
+    try:
+        fake.node.create_service(SetCameraInfo, f"{ns}/fake_driver", driver)
+        resp = spinner.call(Trigger, commit, timeout=30.0, procs=procs)
+        assert not resp.success and resp.message == f"{ns}/fake_driver: disk full: calibration not stored"
+        assert len(received) == 1 and received[0].width == 200 and received[0].k[0] > 0
+
+        behaviour["mode"] = "slow"
+        t0 = time.monotonic()
+        resp = spinner.call(Trigger, commit, timeout=30.0, procs=procs)
+        assert not resp.success and resp.message == f"{ns}/fake_driver did not answer within 5 s", resp.message
+        assert time.monotonic() - t0 < 7.5
+        # the node answers others meanwhile and afterwards
+        resp = spinner.call(Trigger, f"{ns}/calibration_node/reset", timeout=5.0, procs=procs)
+        assert resp.success
+
+        time.sleep(3.5)   # let the slow answer of the fake driver end before switching it
+        behaviour["mode"] = "ok"
+        resp = spinner.call(Trigger, commit, timeout=30.0, procs=procs)
+        assert resp.success and resp.message == f"{ns}/fake_driver: stored", resp.message
+    finally:
+        fake.close()
+    assert all(p.alive() for p in procs), logs(*procs)
+
+
+def test_reset_while_calibrating_and_parameters_while_collecting(launch, spinner, tmp_path):
+    ns, out = "/f2", tmp_path / "out"
+    procs = _start(launch, ns, out)
+    node = f"{ns}/calibration_node"
+    # parameters changed while frames flow: accepted, and the collection goes on
+    for name, value in [("depth.scale", 0.001), ("sync.slop", 0.05), ("views.min", 9), ("depth.convention", "z"),
+                        ("sync.slop", 0.02), ("views.min", 8)]:
+        assert set_parameter(spinner, node, name, value, procs) == (True, "")
+    first = _calibrate_when_ready(spinner, ns, procs)
+    n_views = int(first.message.split(" of ")[1].split()[0])
+
+    calibration = _call_async(spinner, f"{node}/calibrate")
+    reset = spinner.call(Trigger, f"{node}/reset", timeout=10.0, procs=procs)
+    resp = calibration(60.0)
+    assert reset.success and reset.message.startswith("cleared "), reset.message
+    # the running calibration used the views it started with, all of them
+    assert resp.success and int(resp.message.split(" of ")[1].split()[0]) >= n_views, resp.message
+    again = spinner.call(Trigger, f"{node}/calibrate", timeout=30.0, procs=procs)
+    assert again.success is False and "views collected" in again.message or again.success, again.message
+    assert all(p.alive() for p in procs), logs(*procs)
+
+
+def _files(out: Path) -> tuple[np.ndarray, int]:
+    """The calibration in ``out`` must be whole: the YAML and JSON parse, the views load."""
+    import json
+
+    K = read_camera_yaml(out / "calibration.yaml").K
+    doc = json.loads((out / "calibration.json").read_text())
+    assert np.asarray(doc["camera_matrix"]).shape == (3, 3)
+    return K, len(load_views(out / "views"))
+
+
+def test_sigkill_while_writing_keeps_the_previous_files(launch, spinner, tmp_path):
+    ns, out = "/f3", tmp_path / "out"
+    simulator, node = _start(launch, ns, out)
+    _calibrate_when_ready(spinner, ns, (simulator, node))
+    K_before, n_before = _files(out)
+
+    # the next calibration is killed while its views are being written
+    seen = threading.Event()
+
+    def kill_when_writing() -> None:
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and node.alive():
+            if any(out.glob(".views.new.*")):
+                os.kill(node.proc.pid, signal.SIGKILL)
+                seen.set()
+                return
+            time.sleep(0.0005)
+
+    killer = threading.Thread(target=kill_when_writing)
+    killer.start()
+    client = spinner.node.create_client(Trigger, f"{ns}/calibration_node/calibrate")
+    client.call_async(Trigger.Request())   # never answered: the node dies while writing
+    wait_until(lambda: not node.alive(), 60.0, "the node to be killed while writing", simulator)
+    killer.join()
+    spinner.node.destroy_client(client)
+    assert seen.is_set(), "the node ended, but not by the kill while writing\n" + logs(node)
+    K_after, n_after = _files(out)
+    assert np.array_equal(K_after, K_before)
+    assert n_after == n_before   # the old views, not a part of the new ones
