@@ -174,3 +174,27 @@ def test_sigkill_while_writing_keeps_the_previous_files(launch, spinner, tmp_pat
     K_after, n_after = _files(out)
     assert np.array_equal(K_after, K_before)
     assert n_after == n_before   # the old views, not a part of the new ones
+
+
+def test_soak_under_load_and_faults(ros, tmp_path):
+    """benchmarks/reliability.py's soak, shorter outside CI (TOF_CALIB_SOAK_MINUTES overrides):
+    every call answered, no file damaged, no NaN published, the node alive, memory bounded."""
+    import json
+    import subprocess
+    import sys
+
+    minutes = float(os.environ.get("TOF_CALIB_SOAK_MINUTES", "10" if os.environ.get("CI") else "1"))
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reliability.py"
+    report = tmp_path / "reliability.json"
+    env, _ = ros
+    env = {k: v for k, v in env.items() if k != "ROS_DOMAIN_ID"}   # its own domain
+    run = subprocess.run([sys.executable, str(script), "--minutes", str(minutes), "--fuzz", "300",
+                          "--json", str(report)], capture_output=True, text=True, timeout=minutes * 60 + 300, env=env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    soak = json.loads(report.read_text())["soak"]
+    assert soak["data lost"] == 0 and soak["node alive at the end"], soak
+    assert soak["calls answered"] == soak["calls made"] >= 10 * minutes, soak
+    assert all(n > 0 for n in soak["malformed injected"].values()), soak["malformed injected"]
+    assert soak["calls"]["calibrate"]["succeeded"] >= 1, soak["calls"]
+    # bounded: the views (30 of 200x200) and the calibrations' working memory, not the stream
+    assert soak["rss MB (first, after views full, end)"][-1] < 600, soak
