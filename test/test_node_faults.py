@@ -198,3 +198,43 @@ def test_soak_under_load_and_faults(ros, tmp_path):
     assert soak["calls"]["calibrate"]["succeeded"] >= 1, soak["calls"]
     # bounded: the views (30 of 200x200) and the calibrations' working memory, not the stream
     assert soak["rss MB (first, after views full, end)"][-1] < 600, soak
+
+
+def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner):
+    """Property: whatever `ros2 param set` sends, the node answers, stays up, and every value
+    it then holds is one it would accept."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from rcl_interfaces.srv import GetParameters
+
+    from tof_calib_ros.node import CAMERA_NAME, PARAMETERS
+
+    node = launch("calibration_node", "-r", "__ns:=/f4")
+    procs = (node,)
+    names = st.sampled_from([*PARAMETERS, "board.size", "", "views", "depth.scale.x"])
+    values = st.one_of(st.integers(-2**63, 2**63 - 1), st.floats(allow_nan=True, allow_infinity=True),
+                       st.text(max_size=30), st.booleans(), st.sampled_from(["z", "radial", "x_1", "/tmp/o"]),
+                       st.lists(st.integers(-5, 5), max_size=3))
+    answered = {"ok": 0, "refused": 0}
+
+    @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(name=names, value=values)
+    def check(name, value):
+        ok, reason = set_parameter(spinner, "/f4/calibration_node", name, value, procs)
+        answered["ok" if ok else "refused"] += 1
+        assert ok or reason, f"{name}={value!r} refused without a reason"
+
+    check()
+    assert node.alive() and answered["ok"] > 0 and answered["refused"] > 0, answered
+    req = GetParameters.Request(names=list(PARAMETERS))
+    got = spinner.call(GetParameters, "/f4/calibration_node/get_parameters", req, procs=procs).values
+    held = {}
+    for name, v in zip(PARAMETERS, got):
+        held[name] = [v.bool_value, v.integer_value, v.double_value, v.string_value][v.type - 1]
+    assert (held["board.cols"], held["board.rows"], held["board.square"]) == (5, 7, 0.03)   # read-only
+    assert held["depth.convention"] in ("z", "radial")
+    assert 1e-6 <= held["depth.scale"] <= 10.0 and 0.0 <= held["sync.slop"] <= 1.0
+    assert 3 <= held["views.min"] <= held["views.max"] <= 1000
+    assert CAMERA_NAME.fullmatch(held["camera_name"]) and held["output_dir"].strip()
+    resp = spinner.call(Trigger, "/f4/calibration_node/reset", timeout=10.0, procs=procs)
+    assert resp.success
