@@ -28,6 +28,7 @@ DISTORTION_MODEL = "plumb_bob"
 # camera_info_manager refuses any other camera name (CameraInfoManager::validateName)
 _CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 _MAX_MM = np.iinfo(np.uint16).max
+_MAX_SIZE = np.iinfo(np.uint32).max
 
 
 class CalibrationFileError(CalibrationError):
@@ -146,7 +147,7 @@ def _number(value: Any, where: str) -> float:
         raise CalibrationFileError(f"{where}: expected a number, got {value!r}")
     try:
         number = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise CalibrationFileError(f"{where}: expected a number, got {value!r}") from None
     if not math.isfinite(number):
         raise CalibrationFileError(f"{where}: {value!r} is not a finite number")
@@ -170,7 +171,9 @@ def _read_matrix(doc: dict, key: str, shape: tuple[int, int] | None, where: str)
         n = len(data) if isinstance(data, list) else "no list of"
         raise CalibrationFileError(f"{where}: {key} is {rows}x{cols} but its data has {n} values, "
                                    f"not {rows * cols}")
-    return np.array([_number(v, f"{where}: {key}") for v in data], dtype=float).reshape(rows, cols)
+    values = np.array([_number(v, f"{where}: {key}") for v in data], dtype=float)
+    # an empty matrix may claim any size, even one beyond numpy's (0 x 10**30)
+    return values.reshape(rows, cols) if values.size else values.reshape(0, 0)
 
 
 def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
@@ -186,6 +189,8 @@ def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
         raise CalibrationFileError(f"{where}: cannot read ({exc.strerror or exc})") from exc
     except yaml.YAMLError as exc:
         raise CalibrationFileError(f"{where}: not valid YAML ({' '.join(str(exc).split())})") from None
+    except RecursionError:   # the parser recurses once per level of nesting
+        raise CalibrationFileError(f"{where}: not a calibration file (nested too deeply)") from None
     except UnicodeDecodeError:
         raise CalibrationFileError(f"{where}: not a text file") from None
     if not isinstance(doc, dict):
@@ -195,6 +200,8 @@ def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
         value = doc.get(key)
         if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
             raise CalibrationFileError(f"{where}: {key} must be a positive integer, got {value!r}")
+        if value > _MAX_SIZE:
+            raise CalibrationFileError(f"{where}: {key} {value} is beyond what a CameraInfo holds (uint32)")
         size.append(value)
     name, model = doc.get("camera_name", "unknown"), doc.get("distortion_model", DISTORTION_MODEL)
     for key, value in (("camera_name", name), ("distortion_model", model)):

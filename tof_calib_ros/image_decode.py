@@ -95,6 +95,8 @@ def depth_to_metres(image: np.ndarray, encoding: str, scale_16u: float = 0.001) 
     if not isinstance(encoding, str) or encoding not in DEPTH_ENCODINGS:
         raise ImageError(f"{encoding!r} is not a depth encoding; depth must be one of {', '.join(DEPTH_ENCODINGS)}")
     image = np.asarray(image)
+    if image.ndim != 2:
+        raise ImageError(f"depth must be a 2-D image, got shape {image.shape}")
     if image.dtype != ENCODINGS[encoding]:
         raise ImageError(f"{encoding} depth must be a {ENCODINGS[encoding]} array, got {image.dtype}")
     if encoding == "16UC1" and (isinstance(scale_16u, bool) or not isinstance(scale_16u, (int, float, np.number))

@@ -14,6 +14,22 @@ import numpy as np
 
 from .errors import CalibrationError
 
+# Beyond these a board is a typo (or millimetres given as metres), not a calibration target.
+MAX_CORNERS_PER_SIDE = 1000
+MIN_SQUARE_M = 1e-3
+MAX_SQUARE_M = 10.0
+
+
+def whole_number(value: object) -> int | None:
+    """``value`` as an int when it is a whole number (an integral float counts), else None."""
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)) and float(value).is_integer():
+        return int(value)
+    return None
+
 
 @dataclass(frozen=True)
 class Board:
@@ -24,13 +40,23 @@ class Board:
     square: float
 
     def __post_init__(self) -> None:
-        if int(self.cols) != self.cols or int(self.rows) != self.rows:
-            raise CalibrationError(f"board size must be whole numbers, got {self.cols}x{self.rows}")
-        if self.cols < 2 or self.rows < 2:
-            raise CalibrationError(
-                f"board must have at least 2x2 interior corners, got {self.cols}x{self.rows}")
-        if not (np.isfinite(self.square) and self.square > 0):
-            raise CalibrationError(f"square size must be a positive length in metres, got {self.square}")
+        cols, rows = whole_number(self.cols), whole_number(self.rows)
+        if cols is None or rows is None:
+            raise CalibrationError(f"board size must be whole numbers, got {self.cols!r}x{self.rows!r}")
+        if cols < 2 or rows < 2:
+            raise CalibrationError(f"board must have at least 2x2 interior corners, got {cols}x{rows}")
+        if cols > MAX_CORNERS_PER_SIDE or rows > MAX_CORNERS_PER_SIDE:
+            raise CalibrationError(f"board must have at most {MAX_CORNERS_PER_SIDE} interior corners a side, "
+                                   f"got {cols}x{rows}")
+        square = self.square
+        if isinstance(square, (bool, np.bool_)) or not isinstance(square, (int, float, np.integer, np.floating)) \
+                or not MIN_SQUARE_M <= square <= MAX_SQUARE_M:
+            raise CalibrationError(f"square size must be a length in metres from {MIN_SQUARE_M} to {MAX_SQUARE_M}, "
+                                   f"got {square!r}")
+        # frozen: set the normalised values the way dataclasses do
+        object.__setattr__(self, "cols", cols)
+        object.__setattr__(self, "rows", rows)
+        object.__setattr__(self, "square", float(square))
 
     @property
     def n_corners(self) -> int:

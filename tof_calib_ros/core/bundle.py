@@ -19,6 +19,11 @@ from .camera import N_INTRINSICS, depth_of, project, transform_views
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
 RAYLEIGH_MEDIAN = np.sqrt(2 * np.log(2))  # median length of a 2-D Gaussian residual, in sigmas
+UNCONSTRAINED = 1e-12  # relative eigenvalue below which the views do not constrain a combination
+# The least noise the uncertainties assume (pixels, metres): what a corner detector and a
+# plane fit achieve at best. Exact (synthetic) data would otherwise claim exact parameters
+# however weakly the views constrain them.
+MIN_NOISE = (0.01, 1e-4)
 LOSS_SCALE = 2.0  # residuals within this many sigmas count in full
 
 
@@ -207,14 +212,25 @@ def _solve_normal(N: _Normal, lam: float, free_poses: bool) -> tuple[np.ndarray,
 
 
 def global_covariance(N: _Normal, free_poses: bool) -> np.ndarray:
-    """Inverse of the Schur complement: the globals' covariance with the poses marginalised."""
+    """Inverse of the Schur complement: the globals' covariance with the poses marginalised.
+
+    A combination of parameters the views do not constrain at all (e.g. the principal point
+    and the lens' decentering under fronto-parallel views) gives each parameter in it an
+    infinite variance; a pseudo-inverse would give it none, and a verdict built on that would
+    trust a parameter the data never saw. Eigenvalues are taken of the matrix scaled to unit
+    diagonal, so pixels, metres and distortion terms compare."""
     if free_poses:
         S = N.U - np.einsum("vgi,vij,vhj->gh", N.W, np.linalg.pinv(N.V), N.W)
     else:
         S = N.U
-    w, vecs = np.linalg.eigh(S)
-    keep = w > 1e-12 * max(w.max(initial=0.0), 1e-300)
-    return (vecs[:, keep] / w[keep]) @ vecs[:, keep].T
+    d = np.sqrt(np.maximum(np.diag(S), 0.0))
+    scale = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
+    w, vecs = np.linalg.eigh(S * np.outer(scale, scale))
+    keep = w > UNCONSTRAINED * max(w.max(initial=0.0), 1e-300)
+    cov = (vecs[:, keep] / w[keep]) @ vecs[:, keep].T * np.outer(scale, scale)
+    unknown = (d == 0) | np.any(np.abs(vecs[:, ~keep]) > 0.01, axis=1)
+    cov[unknown, unknown] = np.inf   # only the variances: the correlations of those are meaningless
+    return cov
 
 
 def levenberg_marquardt(problem: Problem, state: State, max_iter: int = 100,
@@ -295,10 +311,12 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         sigma_px, sigma_d = new_px, new_d
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
-    problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights)
+    problem = Problem(views, convention, np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1]),
+                      free_global, free_poses, weights)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
-    cov = global_covariance(_normal(J, r, n), free_poses) * ((r @ r) / dof)
+    # Scaled by the residuals when they exceed the assumed noise, never below it.
+    cov = global_covariance(_normal(J, r, n), free_poses) * max((r @ r) / dof, 1.0)
     dpix, ddep, _, _ = problem.raw(state)
     return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
                problem.free_global, float(r @ r), total_it)

@@ -24,7 +24,7 @@ def parse(spec: str) -> list[int]:
     """Indices of the estimated terms from 'none' or terms joined by '+', e.g. 'offset+tilt'."""
     if spec == "none":
         return []
-    names = spec.split("+")
+    names = spec.split("+") if isinstance(spec, str) else []
     if not names or any(n not in TERMS for n in names) or len(set(names)) != len(names):
         raise CalibrationError(f"depth_bias must be 'none' or terms from {sorted(TERMS)} joined by '+', "
                                f"got {spec!r}")

@@ -13,6 +13,10 @@ from scipy.optimize import least_squares
 from .camera import points_from_depth, rays, split_intrinsics
 from .errors import CalibrationError
 
+# A consistent set converges in about ten evaluations; without a cap, inconsistent data (corners
+# of other views, say) took thousands (20 s) on the way to a calibration the verdict rejects.
+MAX_EVALUATIONS = 100
+
 
 def neighbour_pairs(object_points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs of a view's corners that are near each other on the board, and their true distance."""
@@ -69,7 +73,7 @@ def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: l
                np.concatenate([j + s for (_, j, _), s in zip(pairs, starts)]),
                np.concatenate([L for (_, _, L) in pairs]))
     k0 = np.r_[intrinsics[:4], 0.0] if estimate_offset else intrinsics[:4].copy()
-    sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac",
+    sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac", max_nfev=MAX_EVALUATIONS,
                         args=(intrinsics, np.concatenate(pixels), np.concatenate(depth), stacked, convention,
                               estimate_offset))
     out = intrinsics.copy()

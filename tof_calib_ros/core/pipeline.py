@@ -11,30 +11,42 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import bundle, depth_bias as bias_model
-from .board import Board
-from .camera import N_INTRINSICS, check_convention, split_intrinsics
+from . import bundle
+from . import depth_bias as bias_model
+from .board import Board, whole_number
+from .camera import N_INTRINSICS, check_convention, split_intrinsics, transform_views
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, update_intrinsics
 from .detection import Detection, detect
 from .errors import CalibrationError
-from .planarize import (DepthSamples, Plane, board_samples, corner_depth_along, directions, fit_plane_to,
-                        fit_samples, sample_depth)
+from .planarize import (
+    DepthSamples,
+    Plane,
+    board_samples,
+    corner_depth_along,
+    directions,
+    fit_plane_to,
+    fit_samples,
+    sample_depth,
+)
 from .result import INTRINSIC_NAMES, CalibrationResult, ViewReport
 from .traditional import Traditional, calibrate_opencv
 
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
                     "full": [4, 5, 6, 7, 8]}
 MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
+CONTRADICTION_DEG = 5.0  # corners this far apart in tilt cannot be boards the depth shows parallel
 NO_BOARD = "no board found"
 MAX_OUTER_ROUNDS = 6
 OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and the views recalibrated
 PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independent numbers
+DEPTH_UNITS_RANGE = (1e-6, 1.0)  # metres per unit: micrometres to metres
+MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image say nothing across it
 
 
 @dataclass
@@ -69,6 +81,32 @@ def depth_in_metres(depth: np.ndarray, units: float | None = None) -> np.ndarray
     return out
 
 
+def _check_arguments(views: Sequence[View], board: Board, image_size: tuple[int, int] | None,
+                     depth_units: float | None, min_views: int, progress: Callable[[str], None] | None) -> None:
+    """The caller's own mistakes (a wrong type, a size of zero) named before any work is done."""
+    if not isinstance(board, Board):
+        raise CalibrationError(f"board must be a Board, got {type(board).__name__}")
+    if not isinstance(views, Sequence) or isinstance(views, str):
+        raise CalibrationError(f"views must be a list of View, got {type(views).__name__}")
+    for i, v in enumerate(views):
+        if not isinstance(v, View):
+            raise CalibrationError(f"view {i} is not a View but {type(v).__name__}")
+    if image_size is not None:
+        size = [whole_number(n) for n in image_size] if isinstance(image_size, (Sequence, np.ndarray)) else []
+        if len(size) != 2 or None in size or min(size) < 1:
+            raise CalibrationError(f"image_size must be (width, height) in pixels, got {image_size!r}")
+    if depth_units is not None and (isinstance(depth_units, (bool, np.bool_))
+                                    or not isinstance(depth_units, (int, float, np.integer, np.floating))
+                                    or not DEPTH_UNITS_RANGE[0] <= depth_units <= DEPTH_UNITS_RANGE[1]):
+        raise CalibrationError(f"depth_units must be metres per unit of the depth images, from {DEPTH_UNITS_RANGE[0]}"
+                               f" to {DEPTH_UNITS_RANGE[1]}, got {depth_units!r}")
+    if whole_number(min_views) is None or min_views < 2:
+        raise CalibrationError(f"min_views must be a whole number of at least 2 (one view cannot tell the focal "
+                               f"length from the distance), got {min_views!r}")
+    if progress is not None and not callable(progress):
+        raise CalibrationError(f"progress must be a function taking one line of text, got {progress!r}")
+
+
 def _prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | None,
              depth_units: float | None) -> tuple[list[_Prepared], dict[int, str], tuple[int, int]]:
     if len(views) == 0:
@@ -82,6 +120,8 @@ def _prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | 
     kept, rejected = [], {}
     for i, v in enumerate(views):
         depth = np.asarray(v.depth)
+        if not (np.issubdtype(depth.dtype, np.integer) or np.issubdtype(depth.dtype, np.floating)):
+            raise CalibrationError(f"view {i}: depth must be an integer or float image, got {depth.dtype}")
         if depth.shape != (h, w):
             raise CalibrationError(f"view {i}: depth image is {depth.shape[1] if depth.ndim == 2 else '?'}x"
                                    f"{depth.shape[0]} but the image size is {w}x{h}")
@@ -100,24 +140,44 @@ def _prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | 
                 rejected[i] = f"{NO_BOARD}: {found.message}"
                 continue
             corners = found.corners
-        corners = np.asarray(corners, dtype=float).reshape(-1, 2)
+        try:
+            corners = np.asarray(corners, dtype=float).reshape(-1, 2)
+            ids = None if ids is None else np.asarray(ids, dtype=int).ravel()
+        except (TypeError, ValueError):
+            raise CalibrationError(f"view {i}: corners must be (N, 2) pixels and ids N board indices") from None
         if ids is None:
             if len(corners) != board.n_corners:
                 raise CalibrationError(f"view {i}: {len(corners)} corners for a {board.cols}x{board.rows} "
                                        "board; pass ids for a partial set")
             ids = np.arange(board.n_corners)
-        ids = np.asarray(ids, dtype=int).ravel()
-        if len(ids) != len(corners) or len(np.unique(ids)) != len(ids) or ids.min() < 0 \
-                or ids.max() >= board.n_corners:
+        if len(ids) != len(corners) or len(np.unique(ids)) != len(ids) \
+                or (ids.size and (ids.min() < 0 or ids.max() >= board.n_corners)):
             raise CalibrationError(f"view {i}: corner ids must be distinct board indices, one per corner")
         if not np.all(np.isfinite(corners)):
             raise CalibrationError(f"view {i}: corners contain NaN or inf")
         if len(corners) < 4:
             rejected[i] = f"only {len(corners)} corners (need 4)"
             continue
+        if np.any((corners < -0.5) | (corners > np.array([w, h]) - 0.5)):
+            rejected[i] = f"corners lie outside the {w}x{h} image"
+            continue
+        if _on_a_line(board.object_points(ids)[:, :2]):
+            rejected[i] = "its corners lie on one line of the board (give corners off that line too)"
+            continue
+        if _on_a_line(corners, MIN_SPREAD_PX):
+            rejected[i] = "its corners lie on one line in the image (a board seen edge on?)"
+            continue
         kept.append(_Prepared(i, depth_in_metres(depth, depth_units), corners, ids,
                               None if v.amplitude is None else np.asarray(v.amplitude)))
     return kept, rejected, (int(w), int(h))
+
+
+def _on_a_line(points: np.ndarray, tolerance: float = 0.0) -> bool:
+    """True when the points' RMS distance from their best line is at most ``tolerance``
+    (relative to their spread along it when 0): a homography needs points off any line."""
+    centred = points - points.mean(0)
+    major, minor = np.linalg.svd(centred, compute_uv=False) / np.sqrt(len(points))
+    return bool(minor <= max(tolerance, 1e-9 * major))
 
 
 def _require(views: list[_Prepared], rejected: dict[int, str], min_views: int, n_given: int) -> None:
@@ -132,7 +192,7 @@ def _require(views: list[_Prepared], rejected: dict[int, str], min_views: int, n
 
 def _distortion_terms(distortion: str, views: list[_Prepared]) -> list[int]:
     if distortion != "auto":
-        if distortion not in DISTORTION_TERMS:
+        if not isinstance(distortion, str) or distortion not in DISTORTION_TERMS:
             raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
                                    f"got {distortion!r}")
         return DISTORTION_TERMS[distortion]
@@ -190,14 +250,28 @@ def _observations(obj, views: list[_Prepared], depths, floors) -> list[bundle.Ob
     return [bundle.Observations(o, v.corners, d, f, PLANE_DOF) for o, v, d, f in zip(obj, views, depths, floors)]
 
 
-def _check_not_parallel(planes: list[Plane]) -> None:
-    normals = np.array([p.normal for p in planes])
+def _spread_deg(normals: np.ndarray) -> float:
     mean = normals.mean(0)
     mean /= np.linalg.norm(mean)
-    spread = np.degrees(np.arccos(np.clip(normals @ mean, -1, 1))).max()
-    if len(normals) > 1 and spread < MIN_PARALLEL_SPREAD_DEG:
-        raise CalibrationError(f"all {len(normals)} views show the board at the same orientation "
-                               f"(within {spread:.2f} deg): tilt the board differently between views")
+    return float(np.degrees(np.arccos(np.clip(normals @ mean, -1, 1))).max())
+
+
+def _check_not_parallel(planes: list[Plane], corner_poses: np.ndarray | None) -> None:
+    """Refuse views whose depth planes all face one way; ``corner_poses`` (OpenCV's, from the
+    corners alone) tell a board held at one tilt from depth images that do not show the board."""
+    spread = _spread_deg(np.array([p.normal for p in planes]))
+    if len(planes) < 2 or spread >= MIN_PARALLEL_SPREAD_DEG:
+        return
+    if corner_poses is not None:
+        n = len(corner_poses)
+        rotations = np.c_[corner_poses[:, :3], np.zeros((n, 3))]
+        tilts = _spread_deg(transform_views(rotations, np.tile([0.0, 0.0, 1.0], (n, 1)), np.arange(n))[0])
+        if tilts > CONTRADICTION_DEG:
+            raise CalibrationError(f"the depth shows all {len(planes)} views at one orientation (within {spread:.2f} "
+                                   f"deg) but the corners show boards {tilts:.0f} deg apart: the depth images do "
+                                   "not show the board (constant depth? depth of other frames?)")
+    raise CalibrationError(f"all {len(planes)} views show the board at the same orientation "
+                           f"(within {spread:.2f} deg): tilt the board differently between views")
 
 
 def _k_update(views, samples, board, intr, bias, convention, estimate_offset, max_iter=10):
@@ -239,6 +313,8 @@ def _std(fit: bundle.Fit) -> dict[str, float]:
 
 def _result(method, image_size, convention, fit, views, planes, rejected, notes) -> CalibrationResult:
     K, D = split_intrinsics(fit.state.intrinsics)
+    if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
+        raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
     return CalibrationResult(method, image_size, convention, K, D, fit.state.bias.copy(), _std(fit),
                              _report(views, fit, planes), rejected, notes)
 
@@ -260,6 +336,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     """
     # The linear algebra here is small: BLAS threads only contend (with each other and with
     # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
+    _check_arguments(views, board, image_size, depth_units, min_views, progress)
     with threadpool_limits(1):
         result = _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
                             distortion, loss, min_views, progress)
@@ -355,17 +432,21 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
     if not first_planes:
         raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
                                "method='traditional' calibrates from the corners alone")
-    _check_not_parallel(first_planes)
+    _check_not_parallel(first_planes, None if trad is None else trad.poses)
     plane_samples = _PlaneSamples(samples, image_size[0])
     # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better.
     estimate_offset = N_INTRINSICS in bias_terms
     obj_pts = [board.object_points(v.ids) for v in prepared]
     guesses = [guess] if trad is None else [trad.intrinsics, guess]
-    start = min(guesses, key=lambda g: update_intrinsics(
-        g, [v.corners for v in prepared], _planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS),
-                                                        convention)[0], obj_pts, convention, estimate_offset)[2])
-    intr, bias, err = _k_update(prepared, plane_samples, board, start.copy(), np.zeros(bias_model.N_BIAS),
-                                convention, estimate_offset)
+    try:
+        start = min(guesses, key=lambda g: update_intrinsics(
+            g, [v.corners for v in prepared], _planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS),
+                                                            convention)[0], obj_pts, convention, estimate_offset)[2])
+        intr, bias, err = _k_update(prepared, plane_samples, board, start.copy(), np.zeros(bias_model.N_BIAS),
+                                    convention, estimate_offset)
+    except CalibrationError as exc:   # the planes fail once K has run off
+        raise CalibrationError(f"sizing the squares from the depth diverged ({exc}): the corners and the depth "
+                               "disagree (corners out of order or of other frames, or another board?)") from exc
     say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
 
     depths, floors, planes = _planarize_all(prepared, plane_samples, intr, bias, convention)

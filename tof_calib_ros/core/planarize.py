@@ -172,15 +172,18 @@ def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> t
     """Least squares in depth (ToF noise is along the ray, not isotropic as a 3D fit assumes):
     Gauss-Newton on depth - 1 / (coef . u), started from the linear fit of 1 / depth."""
     A = u * (depth ** 2)[:, None]
-    coef = np.linalg.solve(A.T @ A, A.T @ depth)  # 3 unknowns: normal equations are well posed
-    for _ in range(iterations):
-        s = u @ coef
-        J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
-        r = depth - 1.0 / s
-        step = np.linalg.solve(J.T @ J, -J.T @ r)
-        coef = coef + step
-        if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
-            break
+    try:
+        coef = np.linalg.solve(A.T @ A, A.T @ depth)  # 3 unknowns: normal equations are well posed
+        for _ in range(iterations):
+            s = u @ coef
+            J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
+            r = depth - 1.0 / s
+            step = np.linalg.solve(J.T @ J, -J.T @ r)
+            coef = coef + step
+            if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
+                break
+    except np.linalg.LinAlgError:   # rays all along one line: the intrinsics have diverged
+        raise CalibrationError("a view's depth samples do not determine a plane (degenerate rays)") from None
     s = u @ coef
     r = depth - 1.0 / s
     J = u / s[:, None] ** 2
