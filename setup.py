@@ -3,7 +3,7 @@ import sys
 from setuptools import find_packages, setup
 
 package_name = "tof_calib_ros"
-executables = ["calibration_node", "tof_sim_node"]
+executables = ["calibration_node", "tof_sim_node", "tof_calib"]
 # colcon puts the console scripts in lib/<package> (setup.cfg); a pip-built wheel cannot, so it
 # carries small launchers there instead, where 'ros2 run' looks. Only in wheels (pip's PEP 517
 # build runs 'setup.py bdist_wheel' too): in a colcon install they would overwrite the scripts.
@@ -34,5 +34,6 @@ setup(
     entry_points={"console_scripts": [
         "calibration_node = tof_calib_ros.node:main",
         "tof_sim_node = tof_calib_ros.sim_node:main",
+        "tof_calib = tof_calib_ros.cli:main",
     ]},
 )

@@ -1,0 +1,356 @@
+"""tof_calib end to end: simulated recordings in both rosbag2 storages against their ground truth,
+the Kinect v2 folder, broken messages, every exit code, the check of a calibration."""
+from __future__ import annotations
+
+import io
+import json
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tof_calib_ros import Board, View, sim
+from tof_calib_ros.bag_io import IMAGE, BagWriter
+from tof_calib_ros.calibration_file import read_camera_yaml, save_views, write_camera_yaml
+from tof_calib_ros.cli import (
+    EXIT_CODES,
+    EXIT_ERROR,
+    EXIT_MISSING_TOPIC,
+    EXIT_NO_BOARD,
+    EXIT_OK,
+    EXIT_QUALITY,
+    EXIT_TOO_FEW_VIEWS,
+    EXIT_UNREADABLE,
+    EXIT_USAGE,
+    Progress,
+    main,
+)
+from tof_calib_ros.sim_recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
+
+BOARD = ["--size", "5x7", "--square", "0.03"]
+SIM = ["--frames", "240", "--hold", "5", "--transit", "5", "--seed", "1"]
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def last_line(err: str) -> str:
+    return err.strip().splitlines()[-1]
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory) -> dict[str, Path]:
+    """A simulated recording (240 frames of 200x200, 24 poses) in each rosbag2 storage."""
+    out = {}
+    for storage in ("sqlite3", "mcap"):
+        path = tmp_path_factory.mktemp(storage) / "recording"
+        assert main(["simulate", "--output", str(path), "--storage", storage, *SIM]) == EXIT_OK
+        out[storage] = path
+    return out
+
+
+@pytest.fixture(scope="module")
+def calibrated(bags, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("calibrated")
+    assert main(["bag", str(bags["sqlite3"]), *BOARD, "--output", str(out)]) == EXIT_OK
+    return out
+
+
+def _truth(bag: Path) -> dict:
+    return json.loads(truth_path(bag).read_text())
+
+
+# -- the round trip -----------------------------------------------------------------------------
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_a_simulated_recording_calibrates_to_its_ground_truth(bags, tmp_path, capsys, storage):
+    code, out, err = run(capsys, "bag", bags[storage], *BOARD, "--output", tmp_path)
+    assert code == EXIT_OK, err
+    truth = _truth(bags[storage])
+    K_true = np.array(truth["camera_matrix"])
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    K = np.array(doc["camera_matrix"])
+    assert K[0, 0] == pytest.approx(K_true[0, 0], rel=0.005) and K[1, 1] == pytest.approx(K_true[1, 1], rel=0.005)
+    assert K[0, 2] == pytest.approx(K_true[0, 2], abs=1.0) and K[1, 2] == pytest.approx(K_true[1, 2], abs=1.0)
+    assert doc["distortion_coefficients"][0] == pytest.approx(truth["distortion_coefficients"][0], abs=0.01)
+    assert doc["depth_bias"]["depth_offset"] == pytest.approx(truth["depth_offset_m"], abs=0.003)
+    # the YAML a driver loads holds the same numbers; the JSON says where they came from
+    yaml = read_camera_yaml(tmp_path / "calibration.yaml")
+    np.testing.assert_array_equal(yaml.K, K)
+    assert (yaml.width, yaml.height, yaml.camera_name) == (200, 200, "tof_camera")
+    assert doc["source"]["topics"] == {"amplitude": TOPICS["amplitude"], "depth": TOPICS["depth"],
+                                       "camera_info": TOPICS["camera_info"]}
+    assert doc["source"]["camera_info"]["camera_matrix"] == truth["camera_info"]["camera_matrix"]
+    assert doc["board"] == {"cols": 5, "rows": 7, "square_m": 0.03}
+    assert doc["collection"]["frames"] == 240 and doc["collection"]["skipped"] == {}
+    assert len(doc["collection"]["view_stamps"]) == len(doc["views"]) >= 15
+    # what was chosen and why, and the factory camera_info's 4 % error, are reported
+    assert f"amplitude {TOPICS['amplitude']} (by name)" in out and f"({storage}" in out.replace("rosbag2 ", "(")
+    assert re.search(r"fx differs from ours by \+3\.\d\d %", out)
+    # the report holds its plots
+    report = (tmp_path / "report.html").read_text()
+    assert len(re.findall(r"<svg|<img", report)) >= 1
+
+
+def test_one_worker_and_two_keep_the_same_views(bags, calibrated, tmp_path, capsys):
+    code, _, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--workers", "1")
+    assert code == EXIT_OK, err
+    one = json.loads((tmp_path / "calibration.json").read_text())
+    two = json.loads((calibrated / "calibration.json").read_text())
+    assert one["collection"] == two["collection"]   # the same frames kept
+    np.testing.assert_allclose(one["camera_matrix"], two["camera_matrix"], rtol=1e-9)
+
+
+def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
+    code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path, "--depth-bias", "offset+tilt")
+    assert code == EXIT_OK, err
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    K = np.array(doc["camera_matrix"])
+    # OpenCV over all 49 views with a board gives fx 363.6, fy 365.1 (README); the driver's own file 378
+    assert K[0, 0] == pytest.approx(363.6, rel=0.01) and K[1, 1] == pytest.approx(365.1, rel=0.01)
+    assert 0.015 < doc["depth_bias"]["depth_offset"] < 0.035   # the data set's calibration: 25.5 mm
+    assert "51 amplitude/depth pairs" in out and doc["collection"]["frames_with_board"] >= 45
+    assert (tmp_path / "calibration.yaml").is_file() and (tmp_path / "report.html").is_file()
+
+
+def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):
+    """Our own save_views layout, and the other formats a folder may hold, to the ground truth."""
+    camera, board = sim.pmd_camera(), Board(5, 7, 0.03)
+    rng = np.random.default_rng(4)
+    poses = sim.random_poses(camera, board, 14, rng, distance=(0.4, 0.9), max_tilt_deg=40)
+    noise = sim.Noise(depth=0.003, offset=0.02, amplitude=0.002)
+    frames = [sim.render(camera, board, r, t, noise=noise, rng=rng, gain=0.3) for r, t in poses]
+    folder = tmp_path / "views"
+    save_views(folder, [View(f.depth, amplitude=f.amplitude) for f in frames[:8]])
+    for i, f in enumerate(frames[8:11], start=8):     # TIFF, uint16 mm
+        cv2.imwrite(str(folder / f"{i:04d}_amplitude.tiff"), f.amplitude)
+        cv2.imwrite(str(folder / f"{i:04d}_depth.tiff"), np.nan_to_num(np.rint(f.depth * 1000)).astype(np.uint16))
+    for i, f in enumerate(frames[11:], start=11):     # NPY, float metres with NaN
+        np.save(folder / f"{i:04d}_ir.npy", f.amplitude)
+        np.save(folder / f"{i:04d}_depth.npy", f.depth)
+    (folder / "0099_ir.png").write_bytes((folder / "0000_ir.png").read_bytes())   # no depth beside it
+    code, out, err = run(capsys, "images", folder, *BOARD, "--output", tmp_path / "out")
+    assert code == EXIT_OK, err
+    doc = json.loads((tmp_path / "out" / "calibration.json").read_text())
+    assert doc["camera_matrix"][0][0] == pytest.approx(camera.K[0, 0], rel=0.01)
+    assert doc["collection"]["frames"] == 14 and doc["collection"]["skipped"] == {"unreadable": 1}
+    assert "no depth image beside 0099_ir.png" in out
+
+
+# -- broken messages ----------------------------------------------------------------------------
+def test_broken_messages_are_skipped_counted_and_named(tmp_path, capsys):
+    scene = Scene(frames=200, hold=5, transit=5, seed=2)
+    camera = scene.sim_camera
+    path = tmp_path / "broken"
+    with BagWriter(path) as bag:
+        for i, frame in enumerate(render_frames(scene)):
+            t = 1000.0 + i / scene.rate
+            amplitude = bag.image_message(frame.amplitude, "mono16", t, FRAME_ID)
+            depth = bag.image_message(np.nan_to_num(np.rint(frame.depth * 1000)).astype(np.uint16), "16UC1", t,
+                                      FRAME_ID)
+            bag.write(TOPICS["amplitude"], amplitude, t)
+            bag.write(TOPICS["depth"], depth, t)
+            bag.write(TOPICS["camera_info"], bag.camera_info_message(camera.K, camera.D, camera.size, t, FRAME_ID), t)
+            u = t + 0.033   # between frames, farther from them than the pairing slop
+            header = bag.header(u, FRAME_ID)
+            if i == 20:     # wrong encodings
+                bag.write(TOPICS["amplitude"], bag.image_message(np.zeros((200, 200, 3), np.uint8), "rgb8", u,
+                                                                 FRAME_ID), u)
+                bag.write(TOPICS["depth"], replace(depth, header=header, encoding="bgr8"), u)
+            if i == 40:     # data length not matching step x height
+                bag.write(TOPICS["amplitude"], replace(amplitude, header=header, data=amplitude.data[:-400]), u)
+                bag.write(TOPICS["depth"], replace(depth, header=header), u)
+            if i == 60:     # an image of another size
+                bag.write(TOPICS["amplitude"], bag.image_message(np.ones((120, 160), np.uint16), "mono16", u,
+                                                                 FRAME_ID), u)
+                bag.write(TOPICS["depth"], bag.image_message(np.ones((120, 160), np.uint16), "16UC1", u,
+                                                             FRAME_ID), u)
+            if i == 80:     # truncated and garbage serialized data
+                raw = bytes(bag.typestore.serialize_cdr(replace(amplitude, header=header), IMAGE))
+                bag.write_raw(TOPICS["amplitude"], IMAGE, u, raw[:1000])
+                bag.write_raw(TOPICS["depth"], IMAGE, u, np.random.default_rng(0).bytes(len(raw)))
+            if i == 100:    # a stamp out of order
+                bag.write(TOPICS["depth"], replace(depth, header=bag.header(t - 1.0, FRAME_ID)), u)
+    code, out, err = run(capsys, "bag", path, *BOARD, "--output", tmp_path / "out")
+    assert code == EXIT_OK, err
+    doc = json.loads((tmp_path / "out" / "calibration.json").read_text())
+    assert doc["collection"]["skipped"] == {"encoding": 2, "layout": 1, "size": 1, "undecodable": 2,
+                                            "stamp_order": 1}
+    assert doc["collection"]["frames"] == 200
+    skipped = next(line for line in out.splitlines() if line.startswith("skipped:"))
+    for text in ("2 encoding", "2 undecodable", "1 layout", "1 size", "1 stamp_order"):
+        assert text in skipped
+    assert "'rgb8'" in out and "'bgr8'" in out and "160x120" in out and "step x height" in out
+    assert doc["camera_matrix"][0][0] == pytest.approx(camera.K[0, 0], rel=0.01)
+
+
+# -- exit codes -----------------------------------------------------------------------------------
+def test_every_exit_code_is_documented_in_the_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for code, text in EXIT_CODES.items():
+        assert f"  {code}  {text}" in out
+
+
+def test_bad_command_lines_exit_2(capsys, tmp_path):
+    for argv in (["bag", "x", "--size", "5by7", "--square", "0.03", "--output", "o"],
+                 ["bag", "x", "--size", "5x7", "--square", "-1", "--output", "o"],
+                 ["images", "x", "--size", "5x7", "--square", "0.03"],
+                 ["bag", "x", *BOARD, "--output", "o", "--views-min", "9", "--views-max", "8"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == EXIT_USAGE
+        capsys.readouterr()
+
+
+def test_unreadable_input_exits_3(capsys, tmp_path):
+    code, _, err = run(capsys, "bag", tmp_path / "nothing", *BOARD, "--output", tmp_path / "o")
+    assert code == EXIT_UNREADABLE and last_line(err) == f"tof_calib: {tmp_path / 'nothing'}: no such bag"
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "metadata.yaml").write_text("not: [a bag\n")
+    code, _, err = run(capsys, "bag", tmp_path / "junk", *BOARD, "--output", tmp_path / "o")
+    assert code == EXIT_UNREADABLE and "cannot open the bag" in last_line(err)
+    code, _, err = run(capsys, "images", tmp_path / "junk", *BOARD, "--output", tmp_path / "o")
+    assert code == EXIT_UNREADABLE and "no amplitude/depth pairs" in last_line(err)
+    # a bag whose every frame is unusable
+    path = tmp_path / "rgb"
+    with BagWriter(path) as bag:
+        for i in range(3):
+            bag.write("/cam/ir", bag.image_message(np.zeros((4, 4, 3), np.uint8), "rgb8", i, "f"), i)
+            bag.write("/cam/depth", bag.image_message(np.zeros((4, 4), np.uint16), "16UC1", i, "f"), i)
+    code, _, err = run(capsys, "bag", path, *BOARD, "--output", tmp_path / "o")
+    assert code == EXIT_UNREADABLE and last_line(err) == "tof_calib: no usable frame pair: every one was skipped " \
+                                                         "(3 encoding)"
+
+
+def test_missing_topics_exit_4(bags, capsys, tmp_path):
+    code, _, err = run(capsys, "bag", bags["mcap"], *BOARD, "--output", tmp_path, "--depth-topic", "/nope")
+    assert code == EXIT_MISSING_TOPIC
+    assert last_line(err).startswith("tof_calib: --depth-topic /nope: no such topic in the bag (image topics")
+    path = tmp_path / "amplitude_only"
+    with BagWriter(path) as bag:
+        bag.write("/tof/amplitude", bag.image_message(np.ones((4, 4), np.uint16), "mono16", 1.0, "f"), 1.0)
+    code, _, err = run(capsys, "bag", path, *BOARD, "--output", tmp_path)
+    assert code == EXIT_MISSING_TOPIC and "no depth image topic found" in last_line(err)
+
+
+def test_no_board_exits_5(bags, capsys, tmp_path):
+    code, _, err = run(capsys, "bag", bags["sqlite3"], "--size", "9x6", "--square", "0.03", "--output", tmp_path)
+    assert code == EXIT_NO_BOARD
+    assert last_line(err) == "tof_calib: no 9x6 board found in any of 240 frames (--size counts interior " \
+                             "corners, as camera_calibration does)"
+
+
+def test_too_few_views_exit_6(bags, capsys, tmp_path):
+    code, out, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--views-min", "40")
+    assert code == EXIT_TOO_FEW_VIEWS
+    assert re.fullmatch(r"tof_calib: only 2\d views collected, need 40 \(--views-min\); frames were rejected as: "
+                        r".*board moving \(\d+\).*", last_line(err))
+    assert not (tmp_path / "calibration.yaml").exists()
+
+
+def test_a_failed_quality_check_exits_7_and_leaves_the_earlier_calibration(bags, calibrated, capsys, tmp_path):
+    shutil.copytree(calibrated, tmp_path, dirs_exist_ok=True)
+    before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    # depth read in the wrong units (3 mm a count): no focal length and offset reconcile it
+    code, out, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--depth-scale", "0.003")
+    assert code == EXIT_QUALITY
+    assert re.fullmatch(rf"tof_calib: calibration not trusted, nothing in {re.escape(str(tmp_path))} changed: "
+                        r".*depth RMS .* mm exceeds 20 mm.*", last_line(err))
+    after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*")
+             if p.is_file() and p.parts[len(tmp_path.parts)] != "rejected"}
+    assert after == before   # every earlier file as it was, none added
+    assert json.loads((tmp_path / "rejected" / "calibration.json").read_text())["verdict"]["ok"] is False
+    assert (tmp_path / "rejected" / "report.html").is_file()
+    # the next good run replaces the calibration and clears the refusal's report
+    code, _, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path)
+    assert code == EXIT_OK, err
+    assert not (tmp_path / "rejected").exists() and read_camera_yaml(tmp_path / "calibration.yaml").K[0, 0] > 0
+
+
+def test_other_errors_exit_1(bags, capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    code, _, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", blocker / "out")
+    assert code == EXIT_ERROR and "cannot create the output folder" in last_line(err)
+    code, _, err = run(capsys, "simulate", "--output", bags["sqlite3"])
+    assert code == EXIT_ERROR and "exists already" in last_line(err)
+    code, _, err = run(capsys, "check", blocker, bags["sqlite3"], *BOARD)
+    assert code == EXIT_ERROR and "expected a map of calibration keys" in last_line(err)
+
+
+# -- check ----------------------------------------------------------------------------------------
+def test_check_passes_the_calibration_and_fails_the_factory_one(bags, calibrated, capsys, tmp_path):
+    code, out, err = run(capsys, "check", calibrated / "calibration.yaml", bags["mcap"], *BOARD,
+                         "--output", tmp_path)
+    assert code == EXIT_OK, err
+    assert "with calibration.json" in out and "the calibration fits these views" in out
+    doc = json.loads((tmp_path / "check.json").read_text())
+    assert doc["pixel_rms"] < 0.2 and abs(doc["depth_mean_m"]) < 0.002 and len(doc["views"]) >= 15
+    assert abs(doc["depth_scale"]) < 0.003 and all(v["plane_sigma"] < 0.005 for v in doc["views"])
+    # the YAML alone: the camera's 20 mm depth offset is then unknown, and not held against it
+    alone = tmp_path / "alone" / "calibration.yaml"
+    alone.parent.mkdir()
+    alone.write_bytes((calibrated / "calibration.yaml").read_bytes())
+    code, out, err = run(capsys, "check", alone, bags["mcap"], *BOARD)
+    assert code == EXIT_OK, err
+    assert re.search(r"depth residuals mean \+1\d\.\d\d mm, RMS 0\.\d\d mm about the mean", out)
+    # the recording's factory camera_info: focal lengths 4 % long, which the pixels alone cannot tell
+    truth = _truth(bags["mcap"])
+    factory = tmp_path / "factory.yaml"
+    write_camera_yaml(factory, {"K": truth["camera_info"]["camera_matrix"], "D": np.zeros(5),
+                                "image_size": (200, 200)}, "factory")
+    code, out, err = run(capsys, "check", factory, bags["mcap"], *BOARD)
+    assert code == EXIT_QUALITY
+    assert re.search(r"re-projection RMS 0\.\d+ px", out)
+    scale = float(re.search(r"the focal length is off by about \+(\d\.\d)%", last_line(err))[1])
+    assert scale == pytest.approx(4.0, abs=0.5)
+
+
+# -- progress and the console script --------------------------------------------------------------
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_is_a_bar_on_a_terminal_and_plain_lines_otherwise():
+    tty, plain = _Terminal(), io.StringIO()
+    for stream in (tty, plain):
+        p = Progress(10, stream)
+        for i in range(1, 11):
+            p.update(i, lambda: "views 3 | coverage x 50%")
+        p.close("views 3 | coverage x 50%")
+    assert "\r" in tty.getvalue() and "10/10" in tty.getvalue() and "views 3" in tty.getvalue()
+    lines = plain.getvalue().splitlines()
+    assert "\r" not in plain.getvalue() and lines[0].startswith("frames 1/10, views 3")
+    assert lines[-1] == "frames 10/10, views 3 | coverage x 50%" and len(lines) <= 3
+
+
+def test_the_module_runs_and_the_ros2_run_launcher_finds_the_console_script(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "tof_calib_ros.cli", "--help"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0 and "exit codes:" in done.stdout
+    # a wheel's layout: <prefix>/lib/tof_calib_ros/tof_calib runs <prefix>/bin/tof_calib with the arguments
+    launcher = Path(__file__).resolve().parents[1] / "launchers" / "tof_calib"
+    (tmp_path / "lib" / "tof_calib_ros").mkdir(parents=True)
+    (tmp_path / "bin").mkdir()
+    installed = tmp_path / "lib" / "tof_calib_ros" / "tof_calib"
+    installed.write_bytes(launcher.read_bytes())
+    installed.chmod(0o755)
+    missing = subprocess.run([str(installed)], capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 127 and "console script" in missing.stderr
+    script = tmp_path / "bin" / "tof_calib"
+    script.write_text('#!/bin/sh\necho "ran with $*"\n')
+    script.chmod(0o755)
+    done = subprocess.run([str(installed), "bag", "x y"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout == "ran with bag x y\n"

@@ -1,0 +1,99 @@
+"""Amplitude and depth image pairs in a folder: the Kinect v2 data set's layout, which is also
+what ``calibration_file.save_views`` writes.
+
+A pair is ``<name>_ir.<ext>`` (or ``_amplitude``) with ``<name>_depth.<ext>``, in 16- or 8-bit
+PNG, TIFF or NPY (extensions may differ within a pair). Integer depth counts ``depth_scale``
+metres (millimetres by default), float depth is metres; 0 and NaN are invalid. Pairs are taken
+in name order; each is a still, so the collector's motion check does not apply to them.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .core.pipeline import depth_in_metres
+from .replay import FrameError, Skip
+
+EXTENSIONS = (".png", ".tif", ".tiff", ".npy")
+AMPLITUDE_SUFFIXES = ("ir", "amplitude")
+DEPTH_SUFFIX = "depth"
+_NAME = re.compile(r"(?P<stem>.+)_(?P<kind>[A-Za-z]+)$")
+_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
+
+
+def _read(path: Path) -> np.ndarray:
+    try:
+        image = (np.load(path, allow_pickle=False) if path.suffix.lower() == ".npy"
+                 else cv2.imread(str(path), cv2.IMREAD_UNCHANGED))
+    except (OSError, ValueError) as exc:
+        raise FrameError("unreadable", f"{path.name}: {exc}") from None
+    if image is None:
+        raise FrameError("unreadable", f"{path.name}: missing or not a readable image")
+    if image.ndim != 2 or image.dtype.type not in _DTYPES:
+        raise FrameError("encoding", f"{path.name}: {image.dtype} image of shape {image.shape}; need one "
+                                     "channel of uint8, uint16, int16 or float")
+    return image
+
+
+@dataclass(frozen=True)
+class ImageFile:
+    """An image file, read where it is needed (a worker reads the amplitude to find the board)."""
+
+    path: Path
+    nbytes: int = 0   # not read yet
+
+    def load(self) -> np.ndarray:
+        return _read(self.path)
+
+
+@dataclass(frozen=True)
+class FileFrame:
+    """One amplitude/depth pair of files."""
+
+    stamp: float
+    where: str
+    amplitude_path: Path
+    depth_path: Path
+    depth_scale: float
+
+    def amplitude_source(self) -> ImageFile:
+        return ImageFile(self.amplitude_path)
+
+    def decode(self) -> tuple[np.ndarray, np.ndarray]:
+        amplitude, depth = _read(self.amplitude_path), _read(self.depth_path)
+        if amplitude.shape != depth.shape:
+            raise FrameError("size", f"{self.amplitude_path.name} is {amplitude.shape[1]}x{amplitude.shape[0]} "
+                                     f"but {self.depth_path.name} is {depth.shape[1]}x{depth.shape[0]}")
+        scale = self.depth_scale if np.issubdtype(depth.dtype, np.integer) else 1.0
+        return amplitude, depth_in_metres(depth, scale)
+
+
+def scan(directory: str | Path, depth_scale: float = 0.001) -> tuple[list[FileFrame], list[Skip]]:
+    """The folder's pairs in name order, and a Skip for each image without its partner.
+
+    Frames get stamps one second apart: they only order the stills.
+    """
+    directory = Path(directory)
+    found: dict[str, dict[str, Path]] = {}
+    for path in sorted(directory.iterdir()):
+        match = _NAME.match(path.stem)
+        if path.suffix.lower() not in EXTENSIONS or match is None:
+            continue
+        kind = match["kind"].lower()
+        role = "amplitude" if kind in AMPLITUDE_SUFFIXES else "depth" if kind == DEPTH_SUFFIX else None
+        if role is not None:
+            found.setdefault(match["stem"], {})[role] = path
+    frames, skips = [], []
+    for stem in sorted(found):
+        pair = found[stem]
+        if len(pair) < 2:
+            (role, path), = pair.items()
+            skips.append(Skip("unreadable", path.name, f"no {'depth' if role == 'amplitude' else 'amplitude'} "
+                                                       f"image beside {path.name}"))
+            continue
+        frames.append(FileFrame(float(len(frames)), stem, pair["amplitude"], pair["depth"], depth_scale))
+    return frames, skips
