@@ -6,8 +6,11 @@ calibrates on request, publishes the CameraInfo and commits it to the driver.
         -p board.cols:=5 -p board.rows:=7 -p board.square:=0.03
 
 Threads: subscriptions only pair frames and queue them (two deep, the oldest dropped), so the
-executor never falls behind the camera; one worker thread detects boards and collects views;
-services run in their own callback group, so a calibration never blocks the topics.
+executor never falls behind the camera; one worker thread detects boards and collects views
+(a board held still is followed from frame to frame, not searched for anew); services run in
+their own callback group, so a calibration never blocks the topics. While a calibration runs the
+worker drops the frames (counted as dropped): the calibration could not use their views, and
+gets the CPU instead.
 """
 from __future__ import annotations
 
@@ -24,7 +27,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import (
+    ConditionReachedException,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    ShutdownException,
+    TimeoutException,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -34,7 +43,7 @@ from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult, calibrate
 from .calibration_file import write_calibration
-from .collector import CollectorConfig, ViewCollector
+from .collector import CollectorConfig, ViewCollector, quick_locate
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .stamp_sync import StampSync
 
@@ -87,6 +96,35 @@ class _RateLimitedLog:
             self._logger.warning(text)
 
 
+class _Executor(MultiThreadedExecutor):
+    """MultiThreadedExecutor that hands each task to its thread pool once.
+
+    Jazzy's (rclpy 7.1) yields a task again while it still waits in the pool and submits it again;
+    under a steady stream of frames its spinning thread then does little else, holding the GIL, and
+    the callbacks starve: frames are lost before they are paired and ~/calibrate is answered
+    seconds late (ros2/rclpy#1452, fixed in later rclpy). A task is submitted again only once its
+    previous run has ended (a coroutine resumed after an await).
+    """
+
+    def __init__(self, num_threads: int) -> None:
+        super().__init__(num_threads=num_threads)
+        self._runs: dict = {}   # task -> its latest run in the pool
+
+    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
+        try:
+            task, _entity, _node = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
+        except (ExternalShutdownException, ShutdownException, TimeoutException, ConditionReachedException):
+            return
+        run = self._runs.get(task)
+        if run is not None and not run.done():
+            time.sleep(0.001)   # it waits for a pool thread: let one take the GIL and start it
+            return
+        self._runs[task] = self._executor.submit(task)
+        for done in [t for t in self._runs if t.done()]:
+            del self._runs[done]
+            done.result()   # raise what a callback raised, as MultiThreadedExecutor does
+
+
 class CalibrationNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("calibration_node", **kwargs)
@@ -108,6 +146,7 @@ class CalibrationNode(Node):
         self._calibrating = threading.Lock()
         self._stop = False
         self._generation = 0                   # counts resets: a frame from before one is not collected
+        self._recent = (None, None)            # the board's corners in the last two frames, where to look first
         self.result: CalibrationResult | None = None
         self.driver_info: CameraInfo | None = None
         self.frame_id = ""
@@ -202,6 +241,10 @@ class CalibrationNode(Node):
                     return
                 amplitude_msg, depth_msg = self._frames.popleft()
                 generation = self._generation
+                if self._calibrating.locked():
+                    # the running calibration cannot use a new view: leave it the CPU (and the GIL)
+                    self.dropped += 1
+                    continue
             try:
                 self._collect(amplitude_msg, depth_msg, generation)
             except Exception as exc:  # noqa: BLE001 - a bad frame must never end the worker
@@ -225,10 +268,15 @@ class CalibrationNode(Node):
             return
         self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
         stamp = depth_msg.header.stamp.sec + depth_msg.header.stamp.nanosec * 1e-9
+        # A board held still is followed from the last frames (about 1 ms) instead of searched for
+        # in the whole image (10 to 60 ms): the difference between keeping up with the camera or not.
+        near, before = self._recent
+        found = quick_locate(amplitude, self.board, near, before)
+        self._recent = (found.corners, near if found.corners is not None else None)
         with self._lock:
             if generation != self._generation:
                 return
-            outcome = self.collector.add(amplitude, depth, stamp)
+            outcome = self.collector.add(amplitude, depth, stamp, located=found)
             count = len(self.collector.views)
         if outcome.accepted:
             self.get_logger().info(f"accepted view {count}: {outcome.reason}")
@@ -380,7 +428,7 @@ def main(args: list[str] | None = None) -> int:
         rclpy.logging.get_logger("calibration_node").fatal(str(exc))
         rclpy.try_shutdown()
         return 1
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = _Executor(num_threads=4)
     executor.add_node(node)
     try:
         executor.spin()
