@@ -90,7 +90,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     from sensor_msgs.msg import CameraInfo, Image
     from std_srvs.srv import Trigger
 
-    from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, Spinner, logs, ros_environment, wait_until
+    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, wait_until
 
     rnd = random.Random(seed)
     env = ros_environment()
@@ -120,12 +120,14 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     spinner.node.create_subscription(CameraInfo, f"{NS}/calibration_node/camera_info", on_info, latched)
     amplitude_pub = spinner.node.create_publisher(Image, f"{NS}/amplitude", qos_profile_sensor_data)
     depth_pub = spinner.node.create_publisher(Image, f"{NS}/depth", qos_profile_sensor_data)
-    clients = {s: spinner.node.create_client(Trigger, f"{NS}/calibration_node/{s}") for s in calls}
+    clients = {s: spinner.client(Trigger, f"{NS}/calibration_node/{s}") for s in calls}
     proc = None
     try:
-        for c in clients.values():
-            if not c.wait_for_service(timeout_sec=30.0):
-                raise RosProcessError(f"{c.srv_name} not available\n" + logs(*procs))
+        # One answered call per client first, not counted: a client's first answers can be lost
+        # to discovery (Spinner.call), which is Fast DDS's, not the node's. Right after a reset
+        # the calibration is refused at once (too few views) and nothing is there to commit.
+        for s in ("reset", "calibrate", "commit"):
+            spinner.call(Trigger, f"{NS}/calibration_node/{s}", timeout=60.0, procs=procs, resend_after=5.0)
         proc = psutil.Process(node.proc.pid)
         # the launcher execs Python, so the pid is the node's own process
         wait_until(lambda: amplitude_pub.get_subscription_count() > 0, 30.0, "the node's subscriptions", *procs)

@@ -27,6 +27,7 @@ from tof_calib_ros.ros_processes import executable as _executable  # noqa: E402
 from tof_calib_ros.ros_processes import wait_until as _wait_until  # noqa: E402
 
 START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
+RESEND_S = 5.0   # a repeatable call unanswered this long is sent again (Spinner.call says why)
 
 
 def executable(name: str) -> Path:
@@ -46,22 +47,20 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str | Callabl
 
 def call_together(spinner: Spinner, name: str, n: int, timeout: float, *procs: NodeProcess) -> list:
     """n Trigger calls sent at once; every one must be answered."""
-    client = spinner.node.create_client(Trigger, name)
-    try:
-        assert client.wait_for_service(timeout_sec=timeout), f"{name} not available\n" + logs(*procs)
-        futures = [client.call_async(Trigger.Request()) for _ in range(n)]
-        done = [threading.Event() for _ in futures]
-        for f, d in zip(futures, done):
-            f.add_done_callback(lambda _f, d=d: d.set())
-        for d in done:
-            assert d.wait(timeout), f"one of {n} simultaneous calls of {name} was not answered\n" + logs(*procs)
-        return [f.result() for f in futures]
-    finally:
-        spinner.node.destroy_client(client)
+    client = spinner.client(Trigger, name)
+    assert client.wait_for_service(timeout_sec=timeout), f"{name} not available\n" + logs(*procs)
+    futures = [client.call_async(Trigger.Request()) for _ in range(n)]
+    done = [threading.Event() for _ in futures]
+    for f, d in zip(futures, done):
+        f.add_done_callback(lambda _f, d=d: d.set())
+    for d in done:
+        assert d.wait(timeout), f"one of {n} simultaneous calls of {name} was not answered\n" + logs(*procs)
+    return [f.result() for f in futures]
 
 
 def set_parameter(spinner: Spinner, node: str, name: str, value, procs: tuple[NodeProcess, ...]) -> tuple[bool, str]:
     """What `ros2 param set` does: (successful, reason)."""
     req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
-    resp = spinner.call(SetParameters, f"{node}/set_parameters", req, timeout=START_TIMEOUT_S, procs=procs)
+    resp = spinner.call(SetParameters, f"{node}/set_parameters", req, timeout=START_TIMEOUT_S, procs=procs,
+                        resend_after=RESEND_S)
     return resp.results[0].successful, resp.results[0].reason

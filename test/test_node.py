@@ -17,7 +17,7 @@ rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed 
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from ros_helpers import START_TIMEOUT_S, call_together, logs, set_parameter, wait_until  # noqa: E402
+from ros_helpers import RESEND_S, START_TIMEOUT_S, call_together, logs, set_parameter, wait_until  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -42,7 +42,8 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     deadline = time.monotonic() + CALIBRATE_TIMEOUT_S
     answers = []
     while True:
-        resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
+        resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=START_TIMEOUT_S,
+                            procs=procs, resend_after=RESEND_S)
         answers.append(resp.message)
         if resp.success:
             break
@@ -88,13 +89,13 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     assert set_parameter(spinner, "/calibration_node", "output_dir", str(out), procs) == (True, "")
 
     # Commit: the driver's set_camera_info gets the calibration and answers for it.
-    resp = spinner.call(Trigger, "/calibration_node/commit", timeout=30.0, procs=procs)
+    resp = spinner.call(Trigger, "/calibration_node/commit", timeout=30.0, procs=procs, resend_after=RESEND_S)
     assert resp.success, resp.message + "\n" + logs(*procs)
     assert resp.message.startswith("/tof/set_camera_info: ") and str(driver_file) in resp.message, resp.message
     stored = read_camera_yaml(driver_file)
     assert np.allclose(stored.K, read_camera_yaml(out / "calibration.yaml").K, rtol=1e-12)
 
-    resp = spinner.call(Trigger, "/calibration_node/reset", timeout=10.0, procs=procs)
+    resp = spinner.call(Trigger, "/calibration_node/reset", timeout=10.0, procs=procs, resend_after=RESEND_S)
     assert resp.success and resp.message.startswith("cleared "), resp.message
     assert int(resp.message.split()[1]) >= 8, resp.message
     assert node.alive() and simulator.alive()
@@ -113,7 +114,8 @@ def _image(encoding: str, width: int, height: int, bytes_per_pixel: int, stamp: 
 
 def test_bad_messages_are_reported_not_fatal(launch, spinner):
     node = launch("calibration_node", "-r", "__ns:=/t2")
-    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=START_TIMEOUT_S, procs=(node,))
+    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=START_TIMEOUT_S,
+                        procs=(node,), resend_after=RESEND_S)
     assert resp.success
 
     amplitude_pub = spinner.node.create_publisher(Image, "/t2/amplitude", 10)
@@ -162,7 +164,7 @@ def test_bad_messages_are_reported_not_fatal(launch, spinner):
         nan.data = np.full(w * h, np.nan, np.float32).tobytes()
         amplitude_pub.publish(nan)
         depth_pub.publish(_image("16UC1", w, h, 2, stamp))
-    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=10.0, procs=(node,))
+    resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=10.0, procs=(node,), resend_after=RESEND_S)
     assert resp.success and node.alive(), logs(node)
     status = latest[0]
     assert status.get("views") == "0" and int(status.get("frames", "0")) >= 1, status
@@ -173,11 +175,12 @@ def test_bad_messages_are_reported_not_fatal(launch, spinner):
 def test_services_answer_and_refuse_with_reasons(launch, spinner):
     node = launch("calibration_node", "-r", "__ns:=/t3", "-p", "views.min:=5")
     procs = (node,)
-    resp = spinner.call(Trigger, "/t3/calibration_node/reset", timeout=START_TIMEOUT_S, procs=procs)
+    resp = spinner.call(Trigger, "/t3/calibration_node/reset", timeout=START_TIMEOUT_S,
+                        procs=procs, resend_after=RESEND_S)
     assert resp.success and resp.message == "cleared 0 views", resp.message
-    resp = spinner.call(Trigger, "/t3/calibration_node/calibrate", timeout=10.0, procs=procs)
+    resp = spinner.call(Trigger, "/t3/calibration_node/calibrate", timeout=10.0, procs=procs, resend_after=RESEND_S)
     assert not resp.success and "only 0 views collected, need 5" in resp.message, resp.message
-    resp = spinner.call(Trigger, "/t3/calibration_node/commit", timeout=10.0, procs=procs)
+    resp = spinner.call(Trigger, "/t3/calibration_node/commit", timeout=10.0, procs=procs, resend_after=RESEND_S)
     assert not resp.success and "nothing to commit" in resp.message, resp.message
     for resp in call_together(spinner, "/t3/calibration_node/calibrate", 2, 10.0, *procs):
         assert not resp.success and ("only 0 views" in resp.message or "already running" in resp.message), \

@@ -121,6 +121,7 @@ class Spinner:
         self.node = rclpy.create_node(name, context=context)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
+        self._clients: dict[tuple[Any, str], Any] = {}
         self._thread = threading.Thread(target=self._spin, name=f"spin {name}", daemon=True)
         self._thread.start()
 
@@ -132,21 +133,45 @@ class Spinner:
         except ExternalShutdownException:
             pass
 
+    def client(self, srv_type: Any, name: str) -> Any:
+        """One client per service for the spinner's life: a client's first answers are the ones
+        at risk (see ``call``), so new clients are not made per call."""
+        key = (srv_type, name)
+        if key not in self._clients:
+            self._clients[key] = self.node.create_client(srv_type, name)
+        return self._clients[key]
+
     def call(self, srv_type: Any, name: str, request: Any = None, timeout: float = 30.0,
-             procs: tuple[NodeProcess, ...] = ()) -> Any:
-        """Call a service as `ros2 service call` does: wait for it, send, wait for the answer."""
-        client = self.node.create_client(srv_type, name)
-        try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                raise RosProcessError(f"service {name} not available within {timeout:g} s\n" + logs(*procs))
-            future = client.call_async(srv_type.Request() if request is None else request)
-            done = threading.Event()
-            future.add_done_callback(lambda _f: done.set())
-            if not done.wait(timeout):
+             procs: tuple[NodeProcess, ...] = (), resend_after: float | None = None) -> Any:
+        """Call a service as `ros2 service call` does: wait for it, send, wait for the answer.
+
+        Fast DDS drops an answer when the server has not yet discovered the client's reply reader
+        ("failed to send response (timeout)" in the server's log), which a loaded machine makes
+        likely for a new client. A call that may safely be repeated (parameters, reset, commit)
+        passes ``resend_after`` and is sent again while unanswered; the first answer counts.
+        """
+        client = self.client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise RosProcessError(f"service {name} not available within {timeout:g} s\n" + logs(*procs))
+        request = srv_type.Request() if request is None else request
+        done = threading.Event()
+        futures = []
+        deadline = time.monotonic() + timeout
+        while not done.is_set():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                for f in futures:
+                    client.remove_pending_request(f)
                 raise RosProcessError(f"service {name} did not answer within {timeout:g} s\n" + logs(*procs))
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
+            future = client.call_async(request)
+            future.add_done_callback(lambda _f: done.set())
+            futures.append(future)
+            done.wait(left if resend_after is None else min(left, resend_after))
+        answered = next(f for f in futures if f.done())
+        for f in futures:
+            if f is not answered:
+                client.remove_pending_request(f)
+        return answered.result()
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=5.0)
