@@ -232,3 +232,32 @@ def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
     assert "the driver now holds the calibration: True" in run.stdout
     assert np.allclose(read_camera_yaml(tmp_path / "driver_camera_info.yaml").K,
                        read_camera_yaml(tmp_path / "calibration.yaml").K)
+
+
+def test_bag_parameter_replays_a_recording_then_calibrates_and_publishes(launch, spinner, tmp_path):
+    """`-p bag.path:=BAG`: views from a recording instead of the topics, then the usual
+    calibration, CameraInfo and files, to the recording's ground truth."""
+    from tof_calib_ros.sim_recording import FRAME_ID, Scene, truth_path, write_recording
+
+    bag, out = tmp_path / "recording", tmp_path / "out"
+    write_recording(bag, Scene(frames=240, hold=5, transit=5, seed=1), "mcap")
+    truth = json.loads(truth_path(bag).read_text())
+    node = launch("calibration_node", "-r", "__ns:=/b1", "-p", f"bag.path:={bag}", "-p", f"output_dir:={out}")
+    infos: list[CameraInfo] = []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    spinner.node.create_subscription(CameraInfo, "/b1/calibration_node/camera_info", infos.append, latched)
+    info = wait_until(lambda: infos and infos[-1], CALIBRATE_TIMEOUT_S, "the calibration of the replayed bag", node)
+    K, K_true = np.reshape(info.k, (3, 3)), np.array(truth["camera_matrix"])
+    assert K[0, 0] == pytest.approx(K_true[0, 0], rel=0.005) and K[1, 1] == pytest.approx(K_true[1, 1], rel=0.005)
+    assert abs(K[0, 2] - K_true[0, 2]) < 1.0 and abs(K[1, 2] - K_true[1, 2]) < 1.0, K
+    assert info.header.frame_id == FRAME_ID
+    np.testing.assert_allclose(read_camera_yaml(out / "calibration.yaml").K, K)
+    assert "replayed" in node.tail() and node.alive()
+
+    # A bag that cannot be read: said in the log and by ~/calibrate; the node stays up.
+    broken = launch("calibration_node", "-r", "__ns:=/b2", "-p", f"bag.path:={tmp_path / 'no_such_bag'}")
+    resp = spinner.call(Trigger, "/b2/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=(broken,),
+                        resend_after=RESEND_S)
+    assert not resp.success and "cannot replay the bag" in resp.message and "no such bag" in resp.message, \
+        resp.message
+    assert broken.alive()

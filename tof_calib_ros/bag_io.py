@@ -59,10 +59,11 @@ class ImageFields:
     step: int
     is_bigendian: int
     data: np.ndarray
+    frame_id: str = ""
 
     @classmethod
     def of(cls, msg: Any) -> ImageFields:
-        return cls(msg.encoding, msg.height, msg.width, msg.step, msg.is_bigendian, msg.data)
+        return cls(msg.encoding, msg.height, msg.width, msg.step, msg.is_bigendian, msg.data, msg.header.frame_id)
 
     @property
     def nbytes(self) -> int:
@@ -114,6 +115,9 @@ class CameraInfo:
     D: np.ndarray
 
 
+FLAGS = {"amplitude": "--amplitude-topic", "depth": "--depth-topic", "camera_info": "--camera-info-topic"}
+
+
 def _words(topic: str) -> set[str]:
     return set(re.split(r"[^a-z0-9]+", topic.lower())) - {""}
 
@@ -129,9 +133,10 @@ def _pick(role: str, candidates: list[str], flag: str) -> str:
 
 
 def choose_topics(types: dict[str, str], amplitude: str | None = None, depth: str | None = None,
-                  camera_info: str | None = None) -> Topics:
+                  camera_info: str | None = None, flags: dict[str, str] = FLAGS) -> Topics:
     """The amplitude, depth and camera_info topics among ``types`` (topic -> message type):
-    those given, checked, or found by message type and name."""
+    those given, checked, or found by message type and name. ``flags``: how the caller's user
+    gives each (named in the errors)."""
     images = sorted(t for t, m in types.items() if m == IMAGE)
     infos = sorted(t for t, m in types.items() if m == CAMERA_INFO)
     listing = f"image topics in the bag: {', '.join(images) or 'none'}"
@@ -144,41 +149,41 @@ def choose_topics(types: dict[str, str], amplitude: str | None = None, depth: st
         return topic
 
     if amplitude is not None and amplitude == depth:
-        raise TopicError(f"--amplitude-topic and --depth-topic are both {amplitude}: they must differ")
+        raise TopicError(f"{flags['amplitude']} and {flags['depth']} are both {amplitude}: they must differ")
     how = {}
     if depth is not None:
-        depth, how["depth"] = given(depth, IMAGE, "--depth-topic"), "given"
+        depth, how["depth"] = given(depth, IMAGE, flags["depth"]), "given"
     if amplitude is not None:
-        amplitude, how["amplitude"] = given(amplitude, IMAGE, "--amplitude-topic"), "given"
+        amplitude, how["amplitude"] = given(amplitude, IMAGE, flags["amplitude"]), "given"
     if depth is None:
         named = [t for t in images if _words(t) & DEPTH_WORDS and t != amplitude]
         if named:
-            depth, how["depth"] = _pick("depth", named, "--depth-topic"), "by name"
+            depth, how["depth"] = _pick("depth", named, flags["depth"]), "by name"
         elif amplitude is not None and len(images) == 2:
             depth, how["depth"] = next(t for t in images if t != amplitude), "the other image topic"
         else:
             raise TopicError(f"no depth image topic found (none is named depth, distance or range; "
-                             f"{listing}); give it with --depth-topic")
+                             f"{listing}); give it with {flags['depth']}")
     if amplitude is None:
         named = [t for t in images if _words(t) & AMPLITUDE_WORDS and not _words(t) & DEPTH_WORDS
                  and t != depth]
         others = [t for t in images if t != depth]
         if named:
-            amplitude, how["amplitude"] = _pick("amplitude", named, "--amplitude-topic"), "by name"
+            amplitude, how["amplitude"] = _pick("amplitude", named, flags["amplitude"]), "by name"
         elif len(others) == 1:
             amplitude, how["amplitude"] = others[0], "the other image topic"
         else:
             raise TopicError(f"no amplitude image topic found (none is named amplitude, ir, intensity "
-                             f"or gray; {listing}); give it with --amplitude-topic")
+                             f"or gray; {listing}); give it with {flags['amplitude']}")
     if camera_info is not None:
-        camera_info, how["camera_info"] = given(camera_info, CAMERA_INFO, "--camera-info-topic"), "given"
+        camera_info, how["camera_info"] = given(camera_info, CAMERA_INFO, flags["camera_info"]), "given"
     elif infos:
         # the one sharing the longest namespace with the amplitude topic (the intrinsics are its)
         def shared(topic: str) -> int:
             a, b = amplitude.split("/"), topic.split("/")
             return next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
         best = max(map(shared, infos))
-        camera_info = _pick("camera_info", [t for t in infos if shared(t) == best], "--camera-info-topic")
+        camera_info = _pick("camera_info", [t for t in infos if shared(t) == best], flags["camera_info"])
         how["camera_info"] = "by type" if len(infos) == 1 else "by namespace"
     return Topics(amplitude, depth, camera_info, how)
 
@@ -191,10 +196,12 @@ class BagSource:
     """
 
     def __init__(self, path: str | Path, *, amplitude: str | None = None, depth: str | None = None,
-                 camera_info: str | None = None, slop: float = 0.02, depth_scale: float = 0.001) -> None:
+                 camera_info: str | None = None, slop: float = 0.02, depth_scale: float = 0.001,
+                 flags: dict[str, str] = FLAGS) -> None:
         self.path = Path(path)
         self.slop, self.depth_scale = slop, depth_scale
         self._requested = (amplitude, depth, camera_info)
+        self._flags = flags
         self._reader: AnyReader | None = None
         self.unpaired = {"amplitude": 0, "depth": 0}
 
@@ -210,7 +217,7 @@ class BagSource:
             raise BagError(f"{self.path}: cannot open the bag ({_describe(exc)})") from None
         try:
             types = {t: info.msgtype for t, info in self._reader.topics.items()}
-            self.topics = choose_topics(types, *self._requested)
+            self.topics = choose_topics(types, *self._requested, flags=self._flags)
             self.camera_info = self._first_camera_info()
         except BaseException:
             self.close()

@@ -20,6 +20,7 @@ import time
 import traceback
 from collections import deque
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -42,12 +43,17 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult, calibrate
+from .bag_io import BagError, BagSource
 from .calibration_file import write_calibration
 from .collector import CollectorConfig, ViewCollector, quick_locate
 from .image_decode import ImageError, decode_image, depth_to_metres
+from .replay import FrameError, Skip
 from .stamp_sync import StampSync
 
 COMMIT_TIMEOUT_S = 5.0
+# how a user of the node names the bag's topics, for the errors of bag_io.choose_topics
+BAG_FLAGS = {"amplitude": "parameter bag.amplitude_topic", "depth": "parameter bag.depth_topic",
+             "camera_info": "tof_calib bag --camera-info-topic (the node takes the bag's only one)"}
 WARN_PERIOD_S = 5.0
 # camera_info_manager (and so write_camera_yaml) accepts no other camera name
 CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
@@ -80,6 +86,10 @@ PARAMETERS = {
     "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",
                                                                True)),
     "qos.reliable": (False, _descriptor("subscribe reliably instead of best effort (sensor data)", True)),
+    "bag.path": ("", _descriptor("a recording (rosbag2 folder, sqlite3 or mcap, or ROS 1 .bag) to collect views "
+                                 "from instead of the topics; calibrated once replayed", True)),
+    "bag.amplitude_topic": ("", _descriptor("the bag's amplitude topic; empty: found by type and name", True)),
+    "bag.depth_topic": ("", _descriptor("the bag's depth topic; empty: found by type and name", True)),
 }
 
 
@@ -152,14 +162,17 @@ class CalibrationNode(Node):
         self.frame_id = ""
         self.dropped = 0
         self.last_problem = ""
+        self.bag_topics: dict[str, str] = {}   # the bag's, when replaying one
 
         qos = qos_profile_sensor_data
         if p("qos.reliable"):
             qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
         topics = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Image, "amplitude", lambda m: self._on_image(0, m), qos, callback_group=topics)
-        self.create_subscription(Image, "depth", lambda m: self._on_image(1, m), qos, callback_group=topics)
-        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, qos, callback_group=topics)
+        bag = p("bag.path")
+        if not bag:
+            self.create_subscription(Image, "amplitude", lambda m: self._on_image(0, m), qos, callback_group=topics)
+            self.create_subscription(Image, "depth", lambda m: self._on_image(1, m), qos, callback_group=topics)
+            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, qos, callback_group=topics)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.info_pub = self.create_publisher(CameraInfo, "~/camera_info", latched)
@@ -171,11 +184,15 @@ class CalibrationNode(Node):
         self.driver = self.create_client(SetCameraInfo, p("set_camera_info_service"), callback_group=services)
         self.create_timer(1.0, self._publish_diagnostics, callback_group=topics)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._worker = threading.Thread(target=self._work, name="view_collector", daemon=True)
+        if bag:
+            self._worker = threading.Thread(target=self._replay, args=(bag,), name="bag_replay", daemon=True)
+            source = f"the recording {bag}"
+        else:
+            self._worker = threading.Thread(target=self._work, name="view_collector", daemon=True)
+            source = f"'{self.resolve_topic_name('amplitude')}' and '{self.resolve_topic_name('depth')}'"
+        self.get_logger().info(f"collecting views of a {self.board.cols}x{self.board.rows} board "
+                               f"({self.board.square * 1e3:g} mm) from {source}")
         self._worker.start()
-        self.get_logger().info(
-            f"collecting views of a {self.board.cols}x{self.board.rows} board ({self.board.square * 1e3:g} mm) "
-            f"from '{self.resolve_topic_name('amplitude')}' and '{self.resolve_topic_name('depth')}'")
 
     def _param(self, name: str):
         return self.get_parameter(name).value
@@ -268,6 +285,10 @@ class CalibrationNode(Node):
             return
         self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
         stamp = depth_msg.header.stamp.sec + depth_msg.header.stamp.nanosec * 1e-9
+        self._judge(amplitude, depth, stamp, generation)
+
+    def _judge(self, amplitude: np.ndarray, depth: np.ndarray, stamp: float, generation: int) -> None:
+        """A decoded pair, live or replayed, to the collector."""
         # A board held still is followed from the last frames (about 1 ms) instead of searched for
         # in the whole image (10 to 60 ms): the difference between keeping up with the camera or not.
         near, before = self._recent
@@ -283,50 +304,95 @@ class CalibrationNode(Node):
         else:
             self.last_problem = outcome.reason
 
+    def _replay(self, path: str) -> None:
+        """Feed the collector from a bag, as fast as it reads, then calibrate as ~/calibrate would."""
+        log = self.get_logger()
+        p = self._param
+        frames = skipped = 0
+        try:
+            with BagSource(Path(path).expanduser(), amplitude=p("bag.amplitude_topic") or None,
+                           depth=p("bag.depth_topic") or None, slop=p("sync.slop"), depth_scale=p("depth.scale"),
+                           flags=BAG_FLAGS) as bag:
+                t = bag.topics
+                self.bag_topics = {"amplitude": t.amplitude, "depth": t.depth}
+                log.info(f"replaying {bag.path} ({bag.storage}, {bag.frame_count} amplitude messages): "
+                         f"amplitude {t.amplitude} ({t.how['amplitude']}), depth {t.depth} ({t.how['depth']})")
+                size = None if bag.camera_info is None else (bag.camera_info.width, bag.camera_info.height)
+                for item in bag.frames():
+                    if self._stop:
+                        return
+                    if isinstance(item, Skip):
+                        skipped += 1
+                        self._problem(f"message skipped ({item.kind}): {item.where}: {item.reason}")
+                        continue
+                    try:
+                        amplitude, depth = item.decode()
+                    except (FrameError, ImageError) as exc:
+                        skipped += 1
+                        self._problem(f"frame skipped: {item.where}: {exc}")
+                        continue
+                    if size is not None and (depth.shape[1], depth.shape[0]) != size:
+                        skipped += 1
+                        self._problem(f"frame skipped: {item.where}: images are {depth.shape[1]}x{depth.shape[0]} "
+                                      f"but the bag's camera_info says {size[0]}x{size[1]}")
+                        continue
+                    self.frame_id = item.depth.frame_id or item.amplitude.frame_id
+                    frames += 1
+                    self._judge(amplitude, depth, item.stamp, self._generation)
+        except BagError as exc:
+            self._problem(f"cannot replay the bag: {exc}")
+            log.error(f"cannot replay the bag: {exc}")
+            return
+        except Exception as exc:  # noqa: BLE001 - a damaged bag must not end the node
+            self._problem(f"bag replay stopped: {exc!r}")
+            log.error(f"bag replay stopped: {exc!r}\n{traceback.format_exc()}")
+            return
+        with self._lock:
+            n = len(self.collector.views)
+        log.info(f"replayed {path}: {frames} frame pairs, {skipped} skipped, {n} views kept")
+        success, message = self._calibrate()
+        (log.info if success else log.error)(f"calibration of the replayed bag: {message}")
+
     def _problem(self, text: str) -> None:
         self.last_problem = text
         self._warn.warn(text)
 
     # -- services ----------------------------------------------------------------------------
     def _on_calibrate(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        resp.success, resp.message = self._calibrate()
+        return resp
+
+    def _calibrate(self) -> tuple[bool, str]:
+        """Calibrate on the views collected; publish and write only a trusted result."""
         if not self._calibrating.acquire(blocking=False):
-            resp.success, resp.message = False, "a calibration is already running; call again when it is done"
-            return resp
+            return False, "a calibration is already running; call again when it is done"
         try:
             with self._lock:
                 views = list(self.collector.views)
             need = self._param("views.min")
             if len(views) < need:
-                resp.success = False
-                resp.message = (f"only {len(views)} views collected, need {need}: move the board to new "
-                                f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
-                return resp
+                return False, (f"only {len(views)} views collected, need {need}: move the board to new "
+                               f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
             t0 = time.monotonic()
             try:
                 result = calibrate(views, self.board, (views[0].depth.shape[1], views[0].depth.shape[0]),
                                    self._param("depth.convention"))
             except CalibrationError as exc:
-                resp.success, resp.message = False, f"calibration failed: {exc}"
-                return resp
+                return False, f"calibration failed: {exc}"
             except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
                 self.get_logger().error(f"calibration raised {exc!r}:\n{traceback.format_exc()}")
-                resp.success, resp.message = False, f"calibration failed (internal error): {exc!r}"
-                return resp
+                return False, f"calibration failed (internal error): {exc!r}"
             if not result.ok:
-                resp.success = False
-                resp.message = "calibration not trusted, nothing published or written: " + "; ".join(result.verdict)
-                return resp
+                return False, "calibration not trusted, nothing published or written: " + "; ".join(result.verdict)
             try:
                 self._write(result, views)
             except (CalibrationError, OSError) as exc:   # output_dir unwritable or not a directory, disk full
-                resp.success = False
-                resp.message = f"calibrated but not saved, nothing published: {exc}"
-                return resp
+                return False, f"calibrated but not saved, nothing published: {exc}"
             self.result = result
             self.info_pub.publish(self.camera_info(result))
-            resp.success, resp.message = True, self._summary(result, len(views), time.monotonic() - t0)
-            self.get_logger().info(resp.message)
-            return resp
+            message = self._summary(result, len(views), time.monotonic() - t0)
+            self.get_logger().info(message)
+            return True, message
         finally:
             self._calibrating.release()
 
@@ -337,6 +403,8 @@ class CalibrationNode(Node):
                  "camera_name": self._param("camera_name"), "frame_id": self.frame_id,
                  "topics": {"amplitude": self.resolve_topic_name("amplitude"),
                             "depth": self.resolve_topic_name("depth")}}
+        if self._param("bag.path"):
+            extra["topics"] = {"bag": self._param("bag.path"), **self.bag_topics}
         write_calibration(str(self._param("output_dir")), result, views, self._param("camera_name"), extra)
 
     @staticmethod
