@@ -342,8 +342,6 @@ pairs = st.one_of(st.tuples(st.floats(), st.floats()), st.sampled_from([None, 1.
 spans = st.one_of(st.lists(st.floats(), min_size=5, max_size=7).map(tuple), st.sampled_from([None, 1.0, "abcdef"]))
 
 
-@pytest.mark.xfail(strict=True, reason="collector.py (owned elsewhere): CollectorConfig raises TypeError/ValueError on "
-                          "non-numbers and accepts max_views=2.5 or True; see the report of issue 5")
 @settings(max_examples=200, deadline=None, report_multiple_bugs=False)
 @given(st.dictionaries(config_fields, settings_values, max_size=3), st.none() | pairs, st.none() | spans)
 def test_collector_config_is_valid_or_refused(values, depth_range, spans_):

@@ -21,6 +21,7 @@ Rules (``CollectorConfig`` holds the numbers):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import cv2
@@ -52,6 +53,12 @@ NEAR_MARGIN_SQUARES = 2.0
 NEAR_MARGIN_PX = 4.0
 
 
+def _real(value: object) -> bool:
+    """A number that means one (inf may mean "no limit"; NaN, a bool or a string mean nothing)."""
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+            and not (isinstance(value, (float, np.floating)) and math.isnan(value)))
+
+
 @dataclass(frozen=True)
 class CollectorConfig:
     """``spans``: per axis of ``AXES``, the range of kept views that counts as full progress
@@ -74,6 +81,20 @@ class CollectorConfig:
     detect_in_region: bool = False
 
     def __post_init__(self) -> None:
+        reals = {name: getattr(self, name) for name in
+                 ("min_distance", "motion_px", "max_gap_s", "border_px", "min_depth_fraction", "max_tilt_deg")}
+        for name, value in reals.items():
+            if not _real(value):
+                raise CalibrationError(f"{name} must be a number, got {value!r}")
+        for name in ("max_views", "min_views"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
+                raise CalibrationError(f"{name} must be an integer, got {value!r}")
+        if not (isinstance(self.depth_range, (tuple, list)) and len(self.depth_range) == 2
+                and all(map(_real, self.depth_range))):
+            raise CalibrationError(f"depth_range must be (near, far) metres, got {self.depth_range!r}")
+        if not (isinstance(self.spans, (tuple, list)) and all(map(_real, self.spans))):
+            raise CalibrationError(f"spans must be {len(AXES)} numbers (one per axis {AXES}), got {self.spans!r}")
         lo, hi = self.depth_range
         checks = [
             (self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}"),
