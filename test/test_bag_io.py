@@ -252,3 +252,64 @@ def test_a_bag_damaged_midway_gives_the_frames_before_the_damage(tmp_path):
         frames, skips = _frames(source)
     assert 5 < len(frames) < 40
     assert [s.kind for s in skips] == ["read_error"] and "reading stopped" in skips[0].reason
+
+
+# -- property: whatever a bag holds, reading it yields frames or named skips ---------------------
+def _hostile_messages():
+    from hypothesis import strategies as st
+
+    encodings = st.sampled_from(["mono8", "mono16", "16UC1", "32FC1", "8UC1", "rgb8", "", "16uc1", "64FC1"])
+    image = st.fixed_dictionaries({
+        "kind": st.just("image"), "encoding": encodings, "height": st.integers(0, 9), "width": st.integers(0, 9),
+        "step": st.integers(0, 40), "bigendian": st.integers(0, 1), "data": st.binary(max_size=160)})
+    garbage = st.fixed_dictionaries({"kind": st.just("bytes"), "data": st.binary(max_size=120)})
+    flipped = st.fixed_dictionaries({"kind": st.just("flipped"), "cut": st.integers(0, 300),
+                                     "flips": st.lists(st.integers(0, 10 ** 6), max_size=4)})
+    message = st.tuples(st.sampled_from([AMP, DEPTH]), st.floats(0.0, 20.0), st.one_of(image, garbage, flipped))
+    return st.lists(message, max_size=12)
+
+
+def test_any_sequence_of_messages_gives_frames_or_named_skips(tmp_path_factory):
+    """Property: broken fields, garbage bytes, truncated or bit-flipped serializations and any
+    stamp order: the stream ends, each item is a frame or a Skip of a known kind with a reason,
+    and a frame decodes to equal-sized finite-or-NaN images or raises FrameError."""
+    from hypothesis import given, settings
+
+    from tof_calib_ros.replay import SKIP_KINDS
+
+    @settings(max_examples=60, deadline=None)
+    @given(_hostile_messages())
+    def check(messages):
+        path = tmp_path_factory.mktemp("hostile") / "bag"
+        with BagWriter(path, "mcap") as bag:
+            a, d = _images(0)   # one good pair first: the topics exist with their types
+            bag.write(AMP, bag.image_message(a, "mono16", 0.0, "tof"), 0.0)
+            bag.write(DEPTH, bag.image_message(d, "16UC1", 0.0, "tof"), 0.0)
+            for topic, t, m in messages:
+                if m["kind"] == "bytes":
+                    bag.write_raw(topic, IMAGE, t, m["data"])
+                    continue
+                base = bag.image_message(d if topic == DEPTH else a, "16UC1" if topic == DEPTH else "mono16", t, "tof")
+                if m["kind"] == "image":
+                    msg = replace(base, encoding=m["encoding"], height=m["height"], width=m["width"], step=m["step"],
+                                  is_bigendian=m["bigendian"], data=np.frombuffer(m["data"], np.uint8))
+                    bag.write(topic, msg, t)
+                    continue
+                raw = bytearray(bag.typestore.serialize_cdr(base, IMAGE))
+                for f in m["flips"]:
+                    raw[f % len(raw)] ^= 0xFF
+                bag.write_raw(topic, IMAGE, t, bytes(raw[:max(m["cut"], 1)] if m["cut"] < len(raw) else raw))
+        with BagSource(path) as source:
+            for item in source.frames():
+                if isinstance(item, Skip):
+                    assert item.kind in SKIP_KINDS and item.reason and item.where, item
+                    continue
+                try:
+                    amplitude, depth = item.decode()
+                except FrameError as exc:
+                    assert exc.kind in SKIP_KINDS and str(exc)
+                    continue
+                assert amplitude.shape == depth.shape and amplitude.ndim == 2
+                assert depth.dtype.kind == "f" and not np.any(depth[np.isfinite(depth)] < 0)
+
+    check()
