@@ -136,3 +136,23 @@ def test_verdict_names_what_is_poorly_constrained():
     assert "cx is poorly constrained" in reasons and "pixel RMS" in reasons
     assert not res.ok
     assert res.to_dict()["verdict"]["ok"] is False
+
+
+@pytest.mark.parametrize("square, depth_factor, reason", [
+    (0.08, 1.0, "the corners alone give fx="),   # the square given twice its size
+    (0.04, 2.0, "the corners alone give fx="),   # depth read in units twice too large
+    (0.02, 1.0, "depth RMS"),                    # half its size: the offset takes part of it
+])
+def test_a_wrong_square_size_or_depth_unit_is_not_trusted(square, depth_factor, reason):
+    """The corners alone fix the focal length whatever the square size; the depth-aided fit
+    scales it with the square and the depth (a depth offset absorbing part of it): the fit
+    with a wrong square or depth unit must be refused by the verdict, saying why."""
+    views, _ = _scene(8, 11, noise=sim.Noise(depth=0.002))
+    right = calibrate(views, BOARD)
+    assert right.ok, right.verdict
+    for v in views:
+        v.depth = v.depth * depth_factor
+    res = calibrate(views, Board(BOARD.cols, BOARD.rows, square))
+    assert abs(res.K[0, 0] / CAM.params[0] - 1) > 0.1
+    assert not res.ok and any(reason in r for r in res.verdict), res.verdict
+    assert res.to_dict()["corner_only_focal"]["fx"] == pytest.approx(CAM.params[0], rel=0.01)

@@ -311,12 +311,14 @@ def _std(fit: bundle.Fit) -> dict[str, float]:
     return std
 
 
-def _result(method, image_size, convention, fit, views, planes, rejected, notes) -> CalibrationResult:
+def _result(method, image_size, convention, fit, views, planes, rejected, notes,
+            trad: Traditional | None = None) -> CalibrationResult:
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
+    corner_focal = None if trad is None else (*map(float, trad.intrinsics[:2]), *map(float, trad.focal_std))
     return CalibrationResult(method, image_size, convention, K, D, fit.state.bias.copy(), _std(fit),
-                             _report(views, fit, planes), rejected, notes)
+                             _report(views, fit, planes), rejected, notes, corner_focal)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
@@ -479,4 +481,4 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         if np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
             break
-    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes)
+    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes, trad)

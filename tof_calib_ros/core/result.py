@@ -14,6 +14,9 @@ MAX_PIXEL_RMS = 1.0          # px
 MAX_DEPTH_RMS = 0.02         # m, after the bias correction
 MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
 MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
+# The corners alone (Zhang) fix the focal lengths whatever the square size and the depth's units;
+# the depth-aided ones depend on both: beyond this (and 5 of the corners' own std) they disagree.
+MAX_CORNER_DEPTH_DISAGREEMENT = 0.25  # OpenCV alone on 3 or 4 views can be 20 % off
 
 
 @dataclass
@@ -43,6 +46,7 @@ class CalibrationResult:
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    corner_focal: tuple[float, float, float, float] | None = None   # fx, fy, std fx, std fy from the corners alone
 
     @property
     def depth_offset(self) -> float:
@@ -77,6 +81,12 @@ class CalibrationResult:
             s = self.std.get(name, float("nan"))
             if not np.isfinite(s) or s > MAX_CENTER_REL_STD * size:
                 reasons.append(f"{name} is poorly constrained (std {s:.3g} px): tilt the board more between views")
+        if self.corner_focal is not None:
+            fx_c, fy_c, sx_c, sy_c = self.corner_focal
+            for name, f, c, s in (("fx", self.K[0, 0], fx_c, sx_c), ("fy", self.K[1, 1], fy_c, sy_c)):
+                if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * s):
+                    reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
+                                   f"({f / c - 1:+.0%}): is the square size right, and the depth's units?")
         return reasons
 
     @property
@@ -99,6 +109,8 @@ class CalibrationResult:
             "depth_rms_m": self.depth_rms,
             "verdict": {"ok": self.ok, "reasons": self.verdict},
             "notes": list(self.notes),
+            "corner_only_focal": None if self.corner_focal is None else dict(zip(
+                ("fx", "fy", "std_fx", "std_fy"), map(float, self.corner_focal))),
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
             "views": [{
                 "index": v.index, "rvec": v.rvec.tolist(), "tvec": v.tvec.tolist(),
