@@ -389,7 +389,8 @@ def _add_topics(p: argparse.ArgumentParser) -> None:
 
 def _add_calibration(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", required=True, type=Path, metavar="DIR",
-                   help="where calibration.yaml, calibration.json and report.html go")
+                   help="where calibration.yaml, calibration.json, views/ and report.html go (for a refused "
+                        "calibration: its report and figures in DIR/rejected/, nothing else changed)")
     p.add_argument("--depth-bias", default="offset", metavar="TERMS",
                    help="depth error terms estimated alongside: none, or offset, scale, tilt joined by + "
                         "(default offset; offset+tilt for drivers that compute z-depth, e.g. Kinect v2)")
