@@ -263,16 +263,16 @@ class NodeUnderTest:
     the first call's time)."""
 
     def __init__(self, spinner, workdir: Path, env: dict, ns: str, pairs: list, args: list[str]):
-        import psutil
         from diagnostic_msgs.msg import DiagnosticArray
         from std_srvs.srv import Trigger
 
-        from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, logs, wait_until
+        from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, logs, tree_rss_mb, wait_until
 
         self.ns, self.spinner, self.out = ns, spinner, workdir / ns.strip("/") / "out"
         self.proc = NodeProcess("calibration_node", ["-r", f"__ns:={ns}", *BOARD_ARGS, "-p", f"output_dir:={self.out}",
                                                      *args], workdir, env)
-        self._memory = psutil.Process(self.proc.proc.pid)   # the launcher execs Python: the node itself
+        # the launcher execs Python, so the pid is the node's; with its calibration worker
+        self._memory = lambda: tree_rss_mb(self.proc.proc.pid)
         self.samples: list[Sample] = []
         self._status = f"{ns}/calibration_node:"
         node = spinner.node
@@ -298,7 +298,7 @@ class NodeUnderTest:
                 stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
                 self.samples.append(Sample(stamp, int(v["frames"]), int(v["views"]),
                                            int(v["frames dropped (worker busy)"]),
-                                           self._memory.memory_info().rss / 2**20))
+                                           self._memory()))
 
     def wait(self, condition, timeout: float, what) -> object:
         return self._wait(condition, timeout, what, self.proc)

@@ -84,13 +84,12 @@ def _files_whole(out: Path) -> bool:
 
 
 def soak(minutes: float, seed: int = 0, log=print) -> dict:
-    import psutil
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
     from std_srvs.srv import Trigger
 
-    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, wait_until
+    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, tree_rss_mb, wait_until
 
     rnd = random.Random(seed)
     env = ros_environment()
@@ -121,14 +120,12 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     amplitude_pub = spinner.node.create_publisher(Image, f"{NS}/amplitude", qos_profile_sensor_data)
     depth_pub = spinner.node.create_publisher(Image, f"{NS}/depth", qos_profile_sensor_data)
     clients = {s: spinner.client(Trigger, f"{NS}/calibration_node/{s}") for s in calls}
-    proc = None
     try:
         # One answered call per client first, not counted: a client's first answers can be lost
         # to discovery (Spinner.call), which is Fast DDS's, not the node's. Right after a reset
         # the calibration is refused at once (too few views) and nothing is there to commit.
         for s in ("reset", "calibrate", "commit"):
             spinner.call(Trigger, f"{NS}/calibration_node/{s}", timeout=60.0, procs=procs, resend_after=5.0)
-        proc = psutil.Process(node.proc.pid)
         # the launcher execs Python, so the pid is the node's own process
         wait_until(lambda: amplitude_pub.get_subscription_count() > 0, 30.0, "the node's subscriptions", *procs)
 
@@ -163,7 +160,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         while time.monotonic() < end:
             now = time.monotonic()
             if now >= next_sample:
-                memory.append((now, proc.memory_info().rss / 2**20))
+                memory.append((now, tree_rss_mb(node.proc.pid)))   # the node and its calibration worker
                 next_sample = now + 5.0
             if now >= next_burst:
                 for _ in range(20):

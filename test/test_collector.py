@@ -130,10 +130,10 @@ def test_another_image_size_is_rejected_until_reset(sweep_frames):
 def test_memory_is_bounded_and_views_are_copies(sweep_frames, monkeypatch):
     cache, detect = {}, collector.detect
 
-    def cached_detect(image, board):  # the same few images 500 times: detect each once
-        key = image.tobytes()
+    def cached_detect(image, board, **options):  # the same few images 500 times: detect each once
+        key = (image.tobytes(), image.shape, tuple(sorted(options.items())))
         if key not in cache:
-            cache[key] = detect(image, board)
+            cache[key] = detect(image, board, **options)
         return cache[key]
 
     monkeypatch.setattr(collector, "detect", cached_detect)
@@ -177,4 +177,10 @@ def test_kept_views_hold_the_accurate_corners():
     col = ViewCollector(BOARD)
     col.add(frame.amplitude, frame.depth, 0.0)
     assert col.add(frame.amplitude, frame.depth, 0.05).accepted
-    np.testing.assert_array_equal(col.views[0].corners, detect_corners(frame.amplitude, BOARD))
+
+    def rms(corners):   # against the rendered truth
+        return float(np.sqrt(np.mean(np.sum((corners - frame.corners) ** 2, axis=1))))
+
+    # found in the region around the quick corners: as accurate as the whole image's, or more
+    kept, whole = rms(col.views[0].corners), rms(detect_corners(frame.amplitude, BOARD))
+    assert kept < 0.1 and kept <= 1.1 * whole, (kept, whole)

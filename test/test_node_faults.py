@@ -10,6 +10,7 @@ Defined behaviour (README, "Concurrency and faults"):
   the next calibration (depth.convention, views.min); views already kept stay.
 - ~/commit: the driver absent, slow (over 5 s) or refusing is reported; the node goes on.
 - SIGKILL at any moment leaves the previous calibration files whole.
+- the calibration's worker process killed: that calibration fails saying so; the next one works.
 """
 from __future__ import annotations
 
@@ -241,3 +242,24 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     assert CAMERA_NAME.fullmatch(held["camera_name"]) and held["output_dir"].strip()
     resp = spinner.call(Trigger, "/f4/calibration_node/reset", timeout=10.0, procs=procs, resend_after=RESEND_S)
     assert resp.success
+
+
+def test_the_calibration_worker_killed_is_reported_and_replaced(launch, spinner, tmp_path):
+    """The calibration runs in a worker process: a crash there (here a SIGKILL) costs that one
+    calibration, said in the answer; the node, its views and the next calibration go on."""
+    import psutil
+
+    ns = "/f5"
+    procs = _start(launch, ns, tmp_path / "out")
+    node = procs[1]
+    _calibrate_when_ready(spinner, ns, procs)
+    workers = [p for p in psutil.Process(node.proc.pid).children(recursive=True) if not p.children()]
+    assert workers, "no calibration worker process"
+    for p in workers:
+        p.kill()
+    psutil.wait_procs(workers, timeout=10)
+    resp = spinner.call(Trigger, f"{ns}/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
+    assert not resp.success and "worker process ended" in resp.message, resp.message
+    again = spinner.call(Trigger, f"{ns}/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
+    assert again.success, again.message + "\n" + logs(*procs)
+    assert all(p.alive() for p in procs), logs(*procs)

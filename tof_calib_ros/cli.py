@@ -140,8 +140,8 @@ def _board(args: argparse.Namespace) -> Board:
 
 
 def collector_config(views_min: int = VIEWS_MIN, views_max: int = VIEWS_MAX, stills: bool = False) -> CollectorConfig:
-    """The node's collector rules, with the accurate corners found around the quick ones."""
-    return CollectorConfig(max_views=views_max, min_views=views_min, stills=stills, detect_in_region=True)
+    """The node's collector rules."""
+    return CollectorConfig(max_views=views_max, min_views=views_min, stills=stills)
 
 
 def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Skip], total: int | None,

@@ -8,9 +8,10 @@ calibrates on request, publishes the CameraInfo and commits it to the driver.
 Threads: subscriptions only pair frames and queue them (two deep, the oldest dropped), so the
 executor never falls behind the camera; one worker thread detects boards and collects views
 (a board held still is followed from frame to frame, not searched for anew); services run in
-their own callback group, so a calibration never blocks the topics. While a calibration runs the
-worker drops the frames (counted as dropped): the calibration could not use their views, and
-gets the CPU instead.
+their own callback group, so a calibration never blocks the topics. The calibration itself runs
+in a worker process (``CalibrationWorker``), out of reach of the frames' share of the GIL. While
+it runs, the view worker drops the frames (counted as dropped): the calibration could not use
+their views, and gets the CPU instead.
 """
 from __future__ import annotations
 
@@ -42,9 +43,10 @@ from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from . import Board, CalibrationError, CalibrationResult, calibrate
+from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagSource
 from .calibration_file import write_calibration
+from .calibration_worker import CalibrationWorker
 from .collector import CollectorConfig, ViewCollector, quick_locate
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .replay import FrameError, Skip
@@ -154,6 +156,7 @@ class CalibrationNode(Node):
         self._frames: deque = deque(maxlen=2)  # paired frames waiting for the worker
         self._wake = threading.Condition()
         self._calibrating = threading.Lock()
+        self._calibrator = CalibrationWorker()
         self._stop = False
         self._generation = 0                   # counts resets: a frame from before one is not collected
         self._recent = (None, None)            # the board's corners in the last two frames, where to look first
@@ -375,8 +378,9 @@ class CalibrationNode(Node):
                                f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
             t0 = time.monotonic()
             try:
-                result = calibrate(views, self.board, (views[0].depth.shape[1], views[0].depth.shape[0]),
-                                   self._param("depth.convention"))
+                result = self._calibrator.calibrate(views, self.board,
+                                                    (views[0].depth.shape[1], views[0].depth.shape[0]),
+                                                    self._param("depth.convention"))
             except CalibrationError as exc:
                 return False, f"calibration failed: {exc}"
             except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
@@ -484,6 +488,7 @@ class CalibrationNode(Node):
             self._stop = True
             self._wake.notify()
         self._worker.join(timeout=2.0)
+        self._calibrator.close()
         super().destroy_node()
 
 

@@ -134,7 +134,7 @@ def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorCon
     return out
 
 
-def _context() -> multiprocessing.context.BaseContext:
+def worker_context() -> multiprocessing.context.BaseContext:
     """Workers from a fresh process, not forked from this one: a fork copies OpenCV's and the
     BLAS's thread pools in a state the child cannot use (once this process has calibrated, a
     forked worker hangs in its first detection). The fork server is started once, with the
@@ -146,7 +146,7 @@ def _context() -> multiprocessing.context.BaseContext:
     return context
 
 
-def _init_worker() -> None:
+def init_worker() -> None:
     # Each worker has one core's worth of work: threads would only contend.
     cv2.setNumThreads(1)
     threadpool_limits(1)
@@ -203,7 +203,7 @@ class Replay:
     ``image_size`` (width, height), when known (from camera_info), is what every frame must
     have; otherwise the first decoded frame sets it. ``progress`` is called after every frame
     with the summary and the collector. With more than one worker, the workers are started as
-    fresh processes (``_context``), which import the calling script's main module: a script that
+    fresh processes (``worker_context``), which import the calling script's main module: a script that
     runs a replay must do so under ``if __name__ == "__main__":``, as multiprocessing requires.
     """
 
@@ -269,7 +269,7 @@ class Replay:
             finally:
                 cv2.setNumThreads(threads)
             return
-        with _context().Pool(self.workers, initializer=_init_worker) as pool:
+        with worker_context().Pool(self.workers, initializer=init_worker) as pool:
             pending: deque = deque()
             for chunk in chunks:
                 pending.append((chunk, pool.apply_async(_locate_chunk, work(chunk))))

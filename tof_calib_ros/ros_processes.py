@@ -106,6 +106,24 @@ class NodeProcess:
         return self.proc.returncode
 
 
+def tree_rss_mb(pid: int) -> float:
+    """Resident memory of a process and all it started (the node's calibration worker), MB."""
+    import psutil
+
+    try:
+        root = psutil.Process(pid)
+        processes = [root, *root.children(recursive=True)]
+    except psutil.NoSuchProcess:
+        return float("nan")
+    total = 0
+    for p in processes:
+        try:
+            total += p.memory_info().rss
+        except psutil.NoSuchProcess:   # ended meanwhile
+            pass
+    return total / 2**20
+
+
 def logs(*procs: NodeProcess) -> str:
     return "\n".join(p.tail() for p in procs)
 
