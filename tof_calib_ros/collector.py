@@ -292,6 +292,12 @@ class ViewCollector:
         return np.clip(np.array([x, y, size, skew, depth, tilt], dtype=float), 0.0, 1.0)
 
 
+# While the board is not found, the whole image (50 to 90 ms at 640x576 when it holds no board
+# the detector sees) is searched every this many frames, and only where the board was last seen
+# in between: a board lost from sight is found again at most this many frames late (0.2 s at 15 fps).
+WHOLE_IMAGE_EVERY = 4
+
+
 def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = None,
                  before: np.ndarray | None = None, whole_image: bool = True) -> Detection:
     """The quick corners ``add`` judges a frame by, with a blank or constant frame as a miss.
@@ -322,6 +328,32 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
         return locate(amplitude, board)
     except CalibrationError as exc:
         return Detection(None, str(exc))
+
+
+class BoardTracker:
+    """Where to look for the board in a stream of frames: where it was last seen (its motion
+    extrapolated when it was seen in the frame before too, ``quick_locate``); while it is not
+    found, the whole image is searched only every ``WHOLE_IMAGE_EVERY`` frames."""
+
+    def __init__(self, board: Board) -> None:
+        self.board = board
+        self.forget()
+
+    def forget(self) -> None:
+        """Start afresh (a reset, a frame that could not be read)."""
+        self._seen = self._before = None   # the corners last seen, and the frame's before them when consecutive
+        self._misses = 0                   # frames since the board was last seen
+
+    def locate(self, amplitude: np.ndarray) -> Detection:
+        found = quick_locate(amplitude, self.board, self._seen, self._before,
+                             whole_image=self._misses % WHOLE_IMAGE_EVERY == 0)
+        if found.corners is None:
+            self._before = None
+            self._misses += 1
+        else:
+            self._before, self._seen = (self._seen if self._misses == 0 else None), found.corners
+            self._misses = 0
+        return found
 
 
 def accurate_detect(amplitude: np.ndarray, board: Board, quick: np.ndarray, in_region: bool) -> Detection:

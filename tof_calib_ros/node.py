@@ -47,7 +47,7 @@ from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagSource
 from .calibration_file import write_calibration
 from .calibration_worker import CalibrationWorker
-from .collector import CollectorConfig, ViewCollector, quick_locate
+from .collector import BoardTracker, CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .replay import FrameError, Skip
 from .stamp_sync import StampSync
@@ -159,7 +159,7 @@ class CalibrationNode(Node):
         self._calibrator = CalibrationWorker()
         self._stop = False
         self._generation = 0                   # counts resets: a frame from before one is not collected
-        self._recent = (None, None)            # the board's corners in the last two frames, where to look first
+        self._tracker = BoardTracker(self.board)   # where to look for the board first (worker thread only)
         self.result: CalibrationResult | None = None
         self.driver_info: CameraInfo | None = None
         self.frame_id = ""
@@ -293,10 +293,8 @@ class CalibrationNode(Node):
     def _judge(self, amplitude: np.ndarray, depth: np.ndarray, stamp: float, generation: int) -> None:
         """A decoded pair, live or replayed, to the collector."""
         # A board held still is followed from the last frames (about 1 ms) instead of searched for
-        # in the whole image (10 to 60 ms): the difference between keeping up with the camera or not.
-        near, before = self._recent
-        found = quick_locate(amplitude, self.board, near, before)
-        self._recent = (found.corners, near if found.corners is not None else None)
+        # in the whole image (10 to 90 ms): the difference between keeping up with the camera or not.
+        found = self._tracker.locate(amplitude)
         with self._lock:
             if generation != self._generation:
                 return

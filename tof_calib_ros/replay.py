@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .collector import CollectorConfig, Outcome, ViewCollector, accurate_detect, quick_locate
+from .collector import BoardTracker, CollectorConfig, Outcome, ViewCollector, accurate_detect, quick_locate
 from .core.board import Board
 from .core.detection import Detection
 from .core.errors import CalibrationError
@@ -46,10 +46,6 @@ SKIP_KINDS = {
 # the first frame of a chunk has no previous one to follow the board from, so chunks are long.
 CHUNK_FRAMES = 32
 CHUNK_BYTES = 24 << 20
-# While the board is not found, the whole image (50 to 90 ms at 640x576 when it holds no board
-# the detector sees) is searched every this many frames, and only where the board was last seen
-# in between: a board lost from sight is found again at most this many frames late (0.2 s at 15 fps).
-WHOLE_IMAGE_EVERY = 4
 EXAMPLES_PER_KIND = 3
 
 
@@ -101,36 +97,25 @@ class Located:
 
 
 def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorConfig) -> list[Located | Skip]:
-    """The per-frame work, in a worker: read the amplitude image and find the board. In a stream
-    the board is looked for where it was last seen (``quick_locate``'s ``near``; its motion is
-    extrapolated when it was seen in the frame before as well); while it is not found, the whole
-    image is searched only every ``WHOLE_IMAGE_EVERY`` frames. A still (a folder of images) has
-    no such history, but nearly every still with a board is a view worth keeping, so its
-    accurate corners are found here too. A Skip's ``where`` is left for the caller to fill."""
+    """The per-frame work, in a worker: read the amplitude image and find the board, followed
+    through a stream as the node does (``BoardTracker``). A still (a folder of images) has no
+    such history, but nearly every still with a board is a view worth keeping, so its accurate
+    corners are found here too. A Skip's ``where`` is left for the caller to fill."""
     out: list[Located | Skip] = []
-    seen = before = None     # the corners last seen, and the frame's before them when consecutive
-    misses = 0               # frames since the board was last seen (or since the chunk began)
+    tracker = BoardTracker(board)
     for source in sources:
         try:
             amplitude = source.load()
         except FrameError as exc:
             out.append(Skip(exc.kind, "", str(exc)))
-            seen = before = None
-            misses = 0
+            tracker.forget()
             continue
         if config.stills:
             found = quick_locate(amplitude, board)
             out.append(Located(found, None if found.corners is None else
                                accurate_detect(amplitude, board, found.corners, config.detect_in_region)))
             continue
-        found = quick_locate(amplitude, board, seen, before, whole_image=misses % WHOLE_IMAGE_EVERY == 0)
-        if found.corners is None:
-            before = None
-            misses += 1
-        else:
-            before, seen = (seen if misses == 0 else None), found.corners
-            misses = 0
-        out.append(Located(found))
+        out.append(Located(tracker.locate(amplitude)))
     return out
 
 
