@@ -54,7 +54,7 @@ import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.calibration_file import load_views, write_calibration
-from tof_calib_ros.collector import CollectorConfig, ViewCollector, quick_locate
+from tof_calib_ros.collector import BoardTracker, CollectorConfig, ViewCollector, quick_locate
 from tof_calib_ros.core.detection import detect
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
 
@@ -172,7 +172,7 @@ def profile(pairs: list, rate: float) -> dict:
     image (what following saves)."""
     collector = ViewCollector(BOARD, CollectorConfig(max_views=60, min_views=VIEWS_MIN))
     decode, whole, locate, judged, kept = [], [], [], [], []
-    near = before = None
+    tracker = BoardTracker(BOARD)
     for k, (amplitude_msg, depth_msg) in enumerate(pairs):
         t0 = time.perf_counter()
         amplitude = decode_image(amplitude_msg)
@@ -182,9 +182,8 @@ def profile(pairs: list, rate: float) -> dict:
             quick_locate(amplitude, BOARD)
             whole.append(time.perf_counter() - t1)
         t2 = time.perf_counter()
-        found = quick_locate(amplitude, BOARD, near, before)
+        found = tracker.locate(amplitude)
         t3 = time.perf_counter()
-        before, near = (near if found.corners is not None else None), found.corners
         outcome = collector.add(amplitude, depth, k / rate, located=found)
         t4 = time.perf_counter()
         decode.append(t1 - t0)
