@@ -97,7 +97,7 @@ def main() -> None:
     ap.add_argument("--workdir", type=Path, default=Path("/tmp/bag_replay_benchmark"))
     ap.add_argument("--azure-long", action="store_true",
                     help="also a 10,000-frame 640x576 bag (15 GB of disk)")
-    ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "bag_replay.json")
+    ap.add_argument("--json", type=Path, default=Path(__file__).parent / "results" / "bag_replay.json")
     ap.add_argument("--measure", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--workers", type=int, default=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -140,9 +140,9 @@ def main() -> None:
               f"{w1['rss_main_mb']:>4.0f} / {w2['rss_main_mb']:<4.0f} {w1['pss_total_mb']:>4.0f} / "
               f"{w2['pss_total_mb']:<4.0f} | {min(loads):.1f}-{max(loads):.1f}")
     print("(RSS of the main process and PSS of all processes: 1 worker / 2 workers)")
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps({"rows": rows, "cpus": os.cpu_count()}, indent=1))
-    print(f"wrote {args.output}")
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps({"rows": rows, "cpus": os.cpu_count()}, indent=1))
+    print(f"wrote {args.json}")
 
 
 if __name__ == "__main__":

@@ -288,20 +288,21 @@ def _folder_frames(args: argparse.Namespace, board: Board, folder: Path):
     return summary, collector, {"kind": "folder", "path": str(folder)}
 
 
-def cmd_bag(args: argparse.Namespace) -> int:
+def _calibrate_from(args: argparse.Namespace, collect: Callable[[argparse.Namespace, Board, Path], tuple],
+                    source: Path) -> int:
     board = _board(args)
     _output_dir(Path(args.output))
-    summary, collector, source = _bag_frames(args, board, args.bag)
+    summary, collector, described = collect(args, board, source)
     _require_views(summary, collector, board, args.views_min)
-    return _calibrate_and_write(args, board, summary, collector, source)
+    return _calibrate_and_write(args, board, summary, collector, described)
+
+
+def cmd_bag(args: argparse.Namespace) -> int:
+    return _calibrate_from(args, _bag_frames, args.bag)
 
 
 def cmd_images(args: argparse.Namespace) -> int:
-    board = _board(args)
-    _output_dir(Path(args.output))
-    summary, collector, source = _folder_frames(args, board, args.folder)
-    _require_views(summary, collector, board, args.views_min)
-    return _calibrate_and_write(args, board, summary, collector, source)
+    return _calibrate_from(args, _folder_frames, args.folder)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
