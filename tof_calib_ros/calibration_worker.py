@@ -28,9 +28,7 @@ def _watch_parent(pid: int) -> None:
         time.sleep(PARENT_CHECK_S)
         try:
             os.kill(pid, 0)
-        except ProcessLookupError:
-            os._exit(0)
-        except PermissionError:   # another process has taken the pid: the node is gone
+        except (ProcessLookupError, PermissionError):   # gone, or its pid taken by another process
             os._exit(0)
 
 

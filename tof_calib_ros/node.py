@@ -49,7 +49,7 @@ from .calibration_file import write_calibration
 from .calibration_worker import CalibrationWorker
 from .collector import BoardTracker, CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
-from .replay import FrameError, Skip
+from .replay import FrameError, Skip, decode_sized
 from .stamp_sync import StampSync
 
 COMMIT_TIMEOUT_S = 5.0
@@ -327,15 +327,10 @@ class CalibrationNode(Node):
                         self._problem(f"message skipped ({item.kind}): {item.where}: {item.reason}")
                         continue
                     try:
-                        amplitude, depth = item.decode()
+                        amplitude, depth = decode_sized(item, size)
                     except (FrameError, ImageError) as exc:
                         skipped += 1
                         self._problem(f"frame skipped: {item.where}: {exc}")
-                        continue
-                    if size is not None and (depth.shape[1], depth.shape[0]) != size:
-                        skipped += 1
-                        self._problem(f"frame skipped: {item.where}: images are {depth.shape[1]}x{depth.shape[0]} "
-                                      f"but the bag's camera_info says {size[0]}x{size[1]}")
                         continue
                     self.frame_id = item.depth.frame_id or item.amplitude.frame_id
                     frames += 1

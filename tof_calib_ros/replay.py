@@ -182,6 +182,15 @@ class Summary:
             examples.append(item)
 
 
+def decode_sized(frame: Frame, size: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's images; FrameError ("size") when they are not ``size`` (width, height)."""
+    amplitude, depth = frame.decode()
+    h, w = depth.shape
+    if size is not None and (w, h) != tuple(size):
+        raise FrameError("size", f"image is {w}x{h}, the recording's is {size[0]}x{size[1]}")
+    return amplitude, depth
+
+
 class Replay:
     """Feeds frames to a ``ViewCollector`` with the node's rules; ``run`` returns the summary.
 
@@ -215,17 +224,12 @@ class Replay:
     def _judge(self, frame: Frame, located: Located) -> None:
         s = self.summary
         try:
-            amplitude, depth = frame.decode()
+            amplitude, depth = decode_sized(frame, s.image_size)
         except FrameError as exc:
             s.skip(Skip(exc.kind, frame.where, str(exc)))
             return
-        h, w = depth.shape
         if s.image_size is None:
-            s.image_size = (w, h)
-        elif (w, h) != s.image_size:
-            s.skip(Skip("size", frame.where, f"image is {w}x{h}, the recording's is "
-                                             f"{s.image_size[0]}x{s.image_size[1]}"))
-            return
+            s.image_size = (depth.shape[1], depth.shape[0])
         s.frames += 1
         s.boards += located.found.corners is not None
         outcome: Outcome = self.collector.add(amplitude, depth, frame.stamp, located=located.found,
