@@ -64,11 +64,17 @@ def _malformed(kind: str, stamp: float):
 
 
 def _digest(out: Path) -> str:
-    h = hashlib.sha256()
-    for path in sorted(out.rglob("*")):
-        if path.is_file() and not path.name.startswith("."):
-            h.update(path.name.encode() + path.read_bytes())
-    return h.hexdigest()
+    """The published files (not the node's hidden staging folders). A file may vanish while the
+    node swaps views/ in (two renames): then the digest is taken again."""
+    while True:
+        h = hashlib.sha256()
+        try:
+            for path in sorted(out.rglob("*")):
+                if path.is_file() and not any(part.startswith(".") for part in path.relative_to(out).parts):
+                    h.update(path.name.encode() + path.read_bytes())
+        except FileNotFoundError:
+            continue
+        return h.hexdigest()
 
 
 def _files_whole(out: Path) -> bool:
