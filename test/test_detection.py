@@ -188,6 +188,31 @@ def test_tone_map_low_range_uint16_is_not_black():
     assert np.percentile(tone_map(img)[5:], 99) > 240
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16])
+def test_integer_tone_map_stretches_between_the_sorted_percentiles(dtype):
+    """The histogram's percentiles are the sorted values' (np.percentile's interpolation),
+    with saturated pixels left out of the top one unless they are half the image."""
+    rng = np.random.default_rng(3)
+    top = np.iinfo(dtype).max
+    for k in range(200):
+        shape = tuple(rng.integers(1, 30, 2))
+        img = rng.integers(np.iinfo(dtype).min, top, shape, endpoint=True).astype(dtype)
+        if k % 3 == 0:
+            img[rng.random(shape) < rng.random()] = top
+        if k % 3 == 1:
+            img = (img // 97).astype(dtype)
+        values = img.astype(np.float64).ravel()
+        unsaturated = values[values < top]
+        lo = np.percentile(values, 0.5)
+        hi = np.percentile(unsaturated if unsaturated.size >= 0.5 * values.size else values, 99.5)
+        if hi <= lo:
+            lo, hi = values.min(), values.max()
+        if hi <= lo:
+            continue
+        expected = np.clip(np.rint((values - lo) * (255.0 / (hi - lo))), 0, 255)
+        np.testing.assert_array_equal(tone_map(img).ravel(), expected)
+
+
 def test_tone_map_float_with_nan_and_inf():
     img = np.linspace(0.0, 0.05, 400, dtype=np.float32).reshape(20, 20)
     img[0, 0] = np.nan

@@ -54,26 +54,49 @@ def _stretch(image: np.ndarray) -> np.ndarray:
         raise CalibrationError(
             f"amplitude image must be uint8, uint16, int16 or float, got dtype {image.dtype}")
     img = image.astype(np.float64)
-    finite = np.isfinite(img)
-    values = img[finite]
-    if values.size == 0:
-        raise CalibrationError("amplitude image has no finite values")
-    lo = np.percentile(values, 0.5)
-    top = values
     if np.issubdtype(image.dtype, np.integer):
-        # Saturated pixels (often whole retro-reflecting or near objects in ToF) would set the
-        # upper percentile to full scale and darken the board: leave them out of it.
-        unsat = values[values < np.iinfo(image.dtype).max]
-        if unsat.size >= 0.5 * values.size:
-            top = unsat
-    hi = np.percentile(top, 99.5)
-    if hi <= lo:
-        lo, hi = values.min(), values.max()
+        lo, hi = _integer_range(image)
+        finite = None
+    else:
+        finite = np.isfinite(img)
+        values = img[finite]
+        if values.size == 0:
+            raise CalibrationError("amplitude image has no finite values")
+        lo, hi = np.percentile(values, 0.5), np.percentile(values, 99.5)
+        if hi <= lo:
+            lo, hi = values.min(), values.max()
     if hi <= lo:
         raise CalibrationError(f"amplitude image is constant ({lo:g}); no board can be seen")
     out = (img - lo) * (255.0 / (hi - lo))
-    out[~finite] = 0.0
+    if finite is not None:
+        out[~finite] = 0.0
     return out
+
+
+def _integer_range(image: np.ndarray) -> tuple[float, float]:
+    """The 0.5 and 99.5 percentiles of an integer image, interpolated as ``np.percentile`` does,
+    from its histogram: a tenth of the time of sorting a 640x576 image, on every frame searched.
+    Saturated pixels (often whole retro-reflecting or near objects in ToF) would set the upper
+    percentile to full scale and darken the board: they are left out of it unless they are
+    half the image."""
+    info = np.iinfo(image.dtype)
+    counts = np.bincount(image.ravel().astype(np.int64) - info.min, minlength=info.max - info.min + 1)
+    lo = _histogram_percentile(counts, 0.5)
+    unsaturated = counts.copy()
+    unsaturated[-1] = 0
+    hi = _histogram_percentile(unsaturated if counts[-1] <= 0.5 * image.size else counts, 99.5)
+    if hi <= lo:
+        present = np.flatnonzero(counts)
+        lo, hi = float(present[0]), float(present[-1])
+    return lo + info.min, hi + info.min
+
+
+def _histogram_percentile(counts: np.ndarray, q: float) -> float:
+    cum = np.cumsum(counts)
+    pos = q / 100 * (cum[-1] - 1)
+    below = int(pos)
+    a, b = np.searchsorted(cum, [below, min(below + 1, cum[-1] - 1)], side="right")
+    return float(a + (pos - below) * (b - a))
 
 
 def tone_map(image: np.ndarray) -> np.ndarray:
