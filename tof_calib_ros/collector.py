@@ -30,7 +30,7 @@ import numpy as np
 from .core.board import Board
 from .core.detection import UPSCALE_BELOW, Detection, detect, locate, tone_map
 from .core.errors import CalibrationError
-from .core.pipeline import View, depth_in_metres
+from .core.pipeline import View, depth_in_metres, depth_units
 from .core.planarize import sample_depth
 
 AXES = ("x", "y", "size", "skew", "depth", "tilt")
@@ -204,8 +204,8 @@ class ViewCollector:
         partial = self._off_image(corners, w, h)
         if partial:
             return Outcome(False, partial, corners=corners)
-        depth = depth_in_metres(depth_m)
-        z = sample_depth(depth, corners)
+        # Only the corners' depth, not the image's: most frames are judged and let go.
+        z = depth_in_metres(sample_depth(depth_m, corners), depth_units(depth_m))
         valid = int(np.isfinite(z).sum())
         if valid < cfg.min_depth_fraction * len(z):
             return Outcome(False, f"no valid depth on the board: {valid} of {len(z)} corners have depth "
@@ -232,7 +232,7 @@ class ViewCollector:
             return Outcome(False, f"the quick and accurate detections disagree by {offset:.1f} px RMS", params,
                            corners)
         corners = accurate.corners
-        self._views.append(View(depth=depth.astype(np.float32), corners=corners.copy(),
+        self._views.append(View(depth=depth_in_metres(depth_m).astype(np.float32), corners=corners.copy(),
                                 amplitude=amplitude.copy()))
         self._params.append(params)
         self._size = (w, h)

@@ -72,11 +72,15 @@ class _Prepared:
     amplitude: np.ndarray | None
 
 
+def depth_units(depth: np.ndarray) -> float:
+    """Metres a count, unless told: integer images are millimetres, float ones metres."""
+    return 1e-3 if np.issubdtype(np.asarray(depth).dtype, np.integer) else 1.0
+
+
 def depth_in_metres(depth: np.ndarray, units: float | None = None) -> np.ndarray:
-    """Float metres with NaN for invalid pixels; integer images are millimetres unless told."""
+    """Float metres with NaN for invalid pixels (``units`` as ``depth_units`` unless told)."""
     d = np.asarray(depth)
-    scale = units if units is not None else (1e-3 if np.issubdtype(d.dtype, np.integer) else 1.0)
-    out = d.astype(np.float64) * scale
+    out = d.astype(np.float64) * (depth_units(d) if units is None else units)
     out[~np.isfinite(out) | (out <= 0)] = np.nan
     return out
 

