@@ -11,7 +11,7 @@ depth (16UC1, mm) pairs with equal stamps at a fixed offered rate, with the node
 data, best effort). Fast DDS is tuned for large frames (see FASTDDS_PROFILE) unless
 ``--default-transport``. ``--quick``: one 6 s run a rate, memory to 2,500 frames (about 4 min).
 
-- Throughput: the node drops the oldest pair of a two-deep queue when its worker is busy, so
+- Throughput: the node drops the oldest pair of its queue (8 pairs) when its worker is behind, so
   what counts is pairs *processed*: the ``frames`` count of its diagnostics (frames the view
   collector judged), over the diagnostics' own stamps. Per offered rate, the median of runs each
   begun with ``~/reset`` (so views are collected during the run): processed/offered, pairs
@@ -54,8 +54,7 @@ import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.calibration_file import load_views, write_calibration
-from tof_calib_ros.collector import BoardTracker, CollectorConfig, ViewCollector, quick_locate
-from tof_calib_ros.core.detection import detect
+from tof_calib_ros.collector import BoardTracker, CollectorConfig, ViewCollector, accurate_detect, quick_locate
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -386,10 +385,12 @@ def _calibrate_once(node: NodeUnderTest) -> dict:
 
 
 def _offline_views(directory: Path) -> list[View]:
-    """The views the node wrote, with corners from the node's accurate detector."""
+    """The views the node wrote, with corners from the node's accurate detector (around the quick
+    corners, as the node finds them: the whole image's detector misses a few of its views)."""
     views = []
     for v in load_views(directory):
-        found = detect(v.amplitude, BOARD)
+        quick = quick_locate(v.amplitude, BOARD)
+        found = quick if quick.corners is None else accurate_detect(v.amplitude, BOARD, quick.corners, True)
         if found.corners is None:
             raise BenchmarkError(f"a view the node kept has no board for the offline detector: {found.message}")
         views.append(View(depth=v.depth, corners=found.corners, amplitude=v.amplitude))
