@@ -55,6 +55,7 @@ import numpy as np
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.calibration_file import load_views, write_calibration
 from tof_calib_ros.collector import BoardTracker, CollectorConfig, ViewCollector, accurate_detect, quick_locate
+from tof_calib_ros.core.detection import detect
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -385,12 +386,14 @@ def _calibrate_once(node: NodeUnderTest) -> dict:
 
 
 def _offline_views(directory: Path) -> list[View]:
-    """The views the node wrote, with corners from the node's accurate detector (around the quick
-    corners, as the node finds them: the whole image's detector misses a few of its views)."""
+    """The views the node wrote, with corners from the node's accurate detector: around the quick
+    corners, as the node finds them, or in the whole image for the few views the node followed
+    where the quick search of the whole image does not find them."""
     views = []
     for v in load_views(directory):
         quick = quick_locate(v.amplitude, BOARD)
-        found = quick if quick.corners is None else accurate_detect(v.amplitude, BOARD, quick.corners, True)
+        found = detect(v.amplitude, BOARD) if quick.corners is None else \
+            accurate_detect(v.amplitude, BOARD, quick.corners, True)
         if found.corners is None:
             raise BenchmarkError(f"a view the node kept has no board for the offline detector: {found.message}")
         views.append(View(depth=v.depth, corners=found.corners, amplitude=v.amplitude))
