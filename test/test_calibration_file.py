@@ -16,6 +16,7 @@ from tof_calib_ros import View
 from tof_calib_ros import calibration_file as cf
 from tof_calib_ros.calibration_file import (
     CalibrationFileError,
+    encode_views,
     load_views,
     read_camera_yaml,
     save_views,
@@ -335,6 +336,17 @@ def test_load_views_reads_the_kinect_set(kinect_dir: Path) -> None:
 def _views(n: int, value: int) -> list[View]:
     return [View(depth=np.full((6, 8), 1000 + i, np.uint16), amplitude=np.full((6, 8), value, np.uint16))
             for i in range(n)]
+
+
+def test_views_encoded_ahead_are_written_as_the_views_themselves(tmp_path: Path) -> None:
+    views = _views(3, 9)
+    write_calibration(tmp_path / "direct", _result(), views, "tof")
+    encoded = encode_views(views)
+    views[0].amplitude[:] = 1   # encoded already: a later change is not written
+    write_calibration(tmp_path / "ahead", _result(), encoded, "tof")
+    direct, ahead = sorted((tmp_path / "direct" / "views").iterdir()), sorted((tmp_path / "ahead" / "views").iterdir())
+    assert [p.name for p in direct] == [p.name for p in ahead] and len(direct) == 6
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(direct, ahead))
 
 
 def test_write_calibration_replaces_the_views_whole(tmp_path: Path) -> None:

@@ -283,23 +283,35 @@ def _depth_png(depth: Any, units: float | None, where: str) -> np.ndarray:
     return mm.astype(np.uint16)
 
 
-def save_views(directory: str | os.PathLike, views: Sequence[View],
-               depth_units: float | None = None) -> list[Path]:
-    """Write views as NNNN_ir.png and NNNN_depth.png, as in the Kinect v2 data set.
+@dataclass(frozen=True)
+class EncodedViews:
+    """Views as the files ``save_views`` writes, encoded ahead: the node encodes them while the
+    calibration runs (0.5 s for 20 views at 640x576) instead of after it."""
+    files: tuple[tuple[str, bytes], ...]
+
+
+def encode_views(views: Sequence[View], depth_units: float | None = None) -> EncodedViews:
+    """NNNN_ir.png and NNNN_depth.png of each view, as in the Kinect v2 data set.
 
     Depth follows ``calibrate``'s convention (float metres, integer millimetres unless
     ``depth_units`` says otherwise) and is stored as uint16 millimetres, 0 = invalid. Every
     view is converted before the first file is written, so a bad view leaves no partial set.
     """
-    directory = Path(directory)
-    images = []
+    files = []
     for i, view in enumerate(views):
         where = f"view {i}"
         if view.amplitude is None:
             raise CalibrationFileError(f"{where} has no amplitude image; saved views are recalibrated from it")
-        images.append((f"{i:04d}_ir.png", _png(_amplitude_png(view.amplitude, where), where)))
-        images.append((f"{i:04d}_depth.png", _png(_depth_png(view.depth, depth_units, where), where)))
-    return [atomic_write(directory / name, data) for name, data in images]
+        files.append((f"{i:04d}_ir.png", _png(_amplitude_png(view.amplitude, where), where)))
+        files.append((f"{i:04d}_depth.png", _png(_depth_png(view.depth, depth_units, where), where)))
+    return EncodedViews(tuple(files))
+
+
+def save_views(directory: str | os.PathLike, views: Sequence[View] | EncodedViews,
+               depth_units: float | None = None) -> list[Path]:
+    """Write views (``encode_views``, unless encoded already) into ``directory``."""
+    encoded = views if isinstance(views, EncodedViews) else encode_views(views, depth_units)
+    return [atomic_write(Path(directory) / name, data) for name, data in encoded.files]
 
 
 def load_views(directory: str | os.PathLike) -> list[View]:
@@ -319,8 +331,9 @@ def load_views(directory: str | os.PathLike) -> list[View]:
     return views
 
 
-def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence[View], camera_name: str,
-                      extra: Mapping[str, Any] | None = None, depth_units: float | None = None) -> Path:
+def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence[View] | EncodedViews,
+                      camera_name: str, extra: Mapping[str, Any] | None = None,
+                      depth_units: float | None = None) -> Path:
     """Write ``views/``, ``calibration.json`` and ``calibration.yaml`` into ``directory``; returns the YAML.
 
     The YAML goes last, so a driver reading it sees a new calibration only once the views and

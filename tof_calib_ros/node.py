@@ -9,9 +9,9 @@ Threads: subscriptions only pair frames and queue them (``QUEUE_PAIRS`` deep, th
 so the executor never falls behind the camera; one worker thread detects boards and collects views
 (a board held still is followed from frame to frame, not searched for anew); services run in
 their own callback group, so a calibration never blocks the topics. The calibration itself runs
-in a worker process (``CalibrationWorker``), out of reach of the frames' share of the GIL. While
-it runs, the view worker drops the frames (counted as dropped): the calibration could not use
-their views, and gets the CPU instead.
+in a worker process (``CalibrationWorker``), out of reach of the frames' share of the GIL, while
+a thread encodes the views' files. While it runs, the view worker drops the frames (counted as
+dropped): the calibration could not use their views, and gets the CPU instead.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import threading
 import time
 import traceback
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -45,7 +46,7 @@ from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagSource
-from .calibration_file import write_calibration
+from .calibration_file import EncodedViews, encode_views, write_calibration
 from .calibration_worker import CalibrationWorker
 from .collector import BoardTracker, CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
@@ -162,6 +163,7 @@ class CalibrationNode(Node):
         self._wake = threading.Condition()
         self._calibrating = threading.Lock()
         self._calibrator = CalibrationWorker()
+        self._encoder = ThreadPoolExecutor(1, thread_name_prefix="encode_views")
         self._stop = False
         self._generation = 0                   # counts resets: a frame from before one is not collected
         self._tracker = BoardTracker(self.board)   # where to look for the board first (worker thread only)
@@ -375,6 +377,7 @@ class CalibrationNode(Node):
                 return False, (f"only {len(views)} views collected, need {need}: move the board to new "
                                f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
             t0 = time.monotonic()
+            encoded = self._encoder.submit(encode_views, views)   # the files, while the worker calibrates
             try:
                 result = self._calibrator.calibrate(views, self.board,
                                                     (views[0].depth.shape[1], views[0].depth.shape[0]),
@@ -387,7 +390,7 @@ class CalibrationNode(Node):
             if not result.ok:
                 return False, "calibration not trusted, nothing published or written: " + "; ".join(result.verdict)
             try:
-                self._write(result, views)
+                self._write(result, encoded.result())
             except (CalibrationError, OSError) as exc:   # output_dir unwritable or not a directory, disk full
                 return False, f"calibrated but not saved, nothing published: {exc}"
             self.result = result
@@ -398,7 +401,7 @@ class CalibrationNode(Node):
         finally:
             self._calibrating.release()
 
-    def _write(self, result: CalibrationResult, views) -> None:
+    def _write(self, result: CalibrationResult, views: EncodedViews) -> None:
         # what it takes to recalibrate from views/ or to trace the result back to its source
         b = self.board
         extra = {"board": {"cols": b.cols, "rows": b.rows, "square_m": b.square},
@@ -487,6 +490,7 @@ class CalibrationNode(Node):
             self._wake.notify()
         self._worker.join(timeout=2.0)
         self._calibrator.close()
+        self._encoder.shutdown(wait=False, cancel_futures=True)
         super().destroy_node()
 
 
