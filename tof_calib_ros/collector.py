@@ -307,7 +307,7 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
     followed (``_follow``, about 1 ms where the detector takes 10 to 60 ms): from where its
     motion so far puts it, then from where it was. Failing that, the detector looks in the
     region around both (its cost grows with the area searched), and then, unless
-    ``whole_image`` is False, in the whole image.
+    ``whole_image`` is False, in the whole image: with no ``near``, that is the only search.
     """
     if near is not None:
         square = _square_px(near, board)
@@ -324,6 +324,9 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
                 return Detection(found.corners + np.array([x0, y0], dtype=float), found.message)
         if not whole_image:
             return Detection(None, f"no {board.cols}x{board.rows} board found where it was last seen")
+    elif not whole_image:
+        return Detection(None, f"no {board.cols}x{board.rows} board seen lately: the whole image is searched "
+                               f"every {WHOLE_IMAGE_EVERY} frames")
     try:
         return locate(amplitude, board)
     except CalibrationError as exc:
