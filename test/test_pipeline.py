@@ -63,6 +63,24 @@ def test_noisy_tof_views_beat_traditional_calibration():
     assert ours.depth_offset == pytest.approx(0.02, abs=0.003)
 
 
+def test_the_whole_board_sharpens_a_sensor_that_reads_both_colours_alike():
+    # The paper's synthetic sensor: 10 mm on every pixel, no bias. Near frontal, the principal
+    # point rests on the planes' tilts and the focal length on their distances: both gain
+    # from the black squares' pixels.
+    views, _ = _scene(5, 7, noise=sim.Noise(depth_const=0.01), tilt=5, distance=(0.9, 1.2))
+    rng = np.random.default_rng(7)
+    for v in views:
+        v.corners = v.corners + rng.normal(0, 0.02, v.corners.shape)
+    white = calibrate(views, BOARD, depth_bias="none")
+    every = calibrate(views, BOARD, depth_bias="none", plane_squares="all")
+    assert (white.plane_squares, every.plane_squares) == ("white", "all")
+    assert every.views[0].plane_pixels > 3 * white.views[0].plane_pixels
+    got = np.r_[every.K[0, 0], every.K[1, 1], every.K[0, 2], every.K[1, 2]]
+    for k, name in enumerate(("fx", "fy", "cx", "cy")):
+        assert every.std[name] < 0.95 * white.std[name], name
+        assert abs(got[k] - CAM.params[k]) < 4 * every.std[name], name
+
+
 def test_end_to_end_from_rendered_amplitude_images():
     views, frames = _scene(6, 4, noise=sim.Noise(depth=0.003, amplitude=0.002))
     for v, f in zip(views, frames):
@@ -86,6 +104,8 @@ def test_clear_errors_for_bad_input():
         calibrate([View(np.full_like(v.depth, np.nan), v.corners) for v in views], BOARD)
     with pytest.raises(CalibrationError, match="convention"):
         calibrate(views, BOARD, depth_convention="disparity")
+    with pytest.raises(CalibrationError, match="plane_squares must be one of 'white', 'all'"):
+        calibrate(views, BOARD, plane_squares="black")
     with pytest.raises(CalibrationError, match="2x2"):
         Board(1, 5, 0.03)
 

@@ -6,10 +6,11 @@ from tof_calib_ros import Board, CalibrationError, sim
 from tof_calib_ros.core.planarize import (
     board_samples,
     corner_depth,
+    fit_plane_to,
     fit_samples,
     planarize,
     sample_depth,
-    white_square_pixels,
+    square_pixels,
 )
 
 BOARD = Board(8, 6, 0.04)
@@ -52,6 +53,19 @@ def test_noiseless_planarization_is_exact():
     assert plane.sigma < 1e-6
 
 
+def test_square_colours_and_the_outline_of_the_squared_area():
+    board = Board(3, 2, 0.05)   # 4x3 squares from (-0.05, -0.05) to (0.15, 0.10); the top-left is dark
+    x, y = np.meshgrid(np.linspace(-0.1, 0.2, 298), np.linspace(-0.1, 0.15, 247))  # no point on an edge
+    x, y = x.ravel(), y.ravel()
+    area = board.in_squared_area(x, y)
+    np.testing.assert_array_equal(area, (x >= -0.05) & (x <= 0.15) & (y >= -0.05) & (y <= 0.10))
+    white, black = board.is_white(x, y), board.is_black(x, y)
+    assert not (white & black).any() and ((white | black) == area).mean() > 0.99   # only edges differ
+    assert black[np.argmin(np.hypot(x + 0.025, y + 0.025))] and white[np.argmin(np.hypot(x - 0.025, y + 0.025))]
+    inner = board.in_squared_area(x, y, margin=0.2)
+    np.testing.assert_array_equal(inner, (x >= -0.04) & (x <= 0.14) & (y >= -0.04) & (y <= 0.09))
+
+
 def test_white_squares_follow_the_amplitude_when_the_labelling_is_turned():
     board = Board(6, 5, 0.04)  # 7x6 squares: a 180 degree turn swaps the colours
     rng = np.random.default_rng(3)
@@ -59,10 +73,60 @@ def test_white_squares_follow_the_amplitude_when_the_labelling_is_turned():
     f = sim.render(CAM, board, r, t, rng=rng)
     ids = np.arange(board.n_corners)
     turned = f.corners[::-1]
-    fooled = white_square_pixels(f.depth.shape, turned, ids, board, CAM.params, 0.15, None)
-    right = white_square_pixels(f.depth.shape, turned, ids, board, CAM.params, 0.15, f.amplitude)
+    fooled, _ = square_pixels(f.depth.shape, turned, ids, board, CAM.params, 0.15, None)
+    right, _ = square_pixels(f.depth.shape, turned, ids, board, CAM.params, 0.15, f.amplitude)
     amp = f.amplitude.astype(float)
     assert np.median(amp[fooled[:, 1], fooled[:, 0]]) < 0.3 * np.median(amp[right[:, 1], right[:, 0]])
+    # The whole board: its colour labels follow the amplitude the same way.
+    every, black = square_pixels(f.depth.shape, turned, ids, board, CAM.params, 0.15, f.amplitude, "all")
+    a = amp[every[:, 1], every[:, 0]]
+    assert np.median(a[black]) < 0.3 * np.median(a[~black])
+    assert 3 < len(every) / len(right) < 4.5   # both colours, and no margin between squares
+
+
+def test_each_colour_counts_with_its_own_noise():
+    # A plane seen along a grid of rays, black squares 4 times noisier than white: the fit must
+    # weight them by the noise it finds, and state the covariance the errors then have.
+    xs, ys = np.meshgrid(np.linspace(-0.3, 0.3, 60), np.linspace(-0.25, 0.25, 50))
+    u = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    black = ((np.floor(xs.ravel() / 0.05) + np.floor(ys.ravel() / 0.05)) % 2 == 0)
+    coef = np.array([0.1, -0.2, 1.0]) / 0.9
+    sigma = np.where(black, 0.008, 0.002)
+    rng = np.random.default_rng(5)
+    J = u / (u @ coef)[:, None] ** 2
+    ideal = np.linalg.inv((J / sigma[:, None] ** 2).T @ J)   # weighted least squares, the true noise
+    chi2, pooled_err, fit_err = [], [], []
+    for _ in range(200):
+        depth = 1 / (u @ coef) + rng.normal(0, sigma)
+        plane = fit_plane_to(u, depth, u[:, :2], black)
+        e = plane.coef - coef
+        chi2.append(e @ np.linalg.solve(plane.covariance, e))
+        fit_err.append(e)
+        pooled_err.append(fit_plane_to(u, depth, u[:, :2], np.zeros_like(black)).coef - coef)
+        assert plane.sigma == pytest.approx(0.002, rel=0.1)
+    np.testing.assert_allclose(np.diag(plane.covariance), np.diag(ideal), rtol=0.15)
+    assert 2.5 < np.mean(chi2) < 3.5                     # 3 for an honest covariance
+    # Equal weights would waste the white squares' precision.
+    assert np.mean(np.square(fit_err)) < 0.5 * np.mean(np.square(pooled_err))
+
+
+@pytest.mark.parametrize("convention", ["z", "radial"])
+def test_the_whole_board_lowers_corner_depth_error_when_both_colours_read_alike(convention):
+    frames = _frames(convention)
+    ids = np.arange(BOARD.n_corners)
+    err, predicted = {}, {}
+    for squares in ("white", "all"):
+        e, p = [], []
+        for f in frames:
+            samples = board_samples(f.depth, f.corners, ids, BOARD, CAM.params, f.amplitude, squares=squares)
+            d, se = corner_depth(fit_samples(samples, CAM.params, convention), f.corners, CAM.params, convention)
+            e.append(d - f.corner_depth)
+            p.append(se)
+        err[squares] = np.sqrt(np.mean(np.concatenate(e) ** 2))
+        predicted[squares] = np.sqrt(np.mean(np.concatenate(p) ** 2))
+    # More than twice the pixels: the error falls as the stated standard error does.
+    assert predicted["all"] < predicted["white"] / np.sqrt(2)
+    assert 0.6 < err["all"] / predicted["all"] < 1.6, (err, predicted)
 
 
 def test_flying_pixels_and_invalid_depth_do_not_bias_the_plane():

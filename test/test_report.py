@@ -193,6 +193,18 @@ def test_where_opencv_refuses_the_report_says_so(tmp_path):
     _check_images(page, at_least=6)
 
 
+def test_a_whole_board_calibration_is_recalibrated_on_the_whole_board(tmp_path):
+    views = _scene(6, 4)
+    result = calibrate(views, BOARD, distortion="plumb_bob", plane_squares="all")
+    page = _Page(write_report(tmp_path / "r.html", views, BOARD, result).read_text("utf-8"))
+    assert "planes on the all squares" in page.sections["summary"]
+    assert "pixels of both colours" in page.sections["planarization"]
+    even = calibrate(views[0::2], BOARD, distortion="plumb_bob", plane_squares="all")
+    white = calibrate(views[0::2], BOARD, distortion="plumb_bob")
+    shown = page.rows("cross-validation")["fx"][0]
+    assert _shows(shown, even.K[0, 0]) and not _shows(shown, white.K[0, 0])
+
+
 def test_a_robust_fit_that_dropped_a_corner(tmp_path):
     views = _scene(5, 8)
     views[2].corners[10] += (12.0, -9.0)   # misdetected

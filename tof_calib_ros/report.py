@@ -139,12 +139,13 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
 
 # -- what the report computes ------------------------------------------------------------------
 def _model_options(result: CalibrationResult) -> dict[str, str]:
-    """The depth bias and distortion model of the result: the terms it estimated (std > 0)."""
+    """The depth bias and distortion model of the result (the terms it estimated: std > 0) and
+    the squares its planes were fitted to."""
     free = {name for name, s in result.std.items() if s > 0}
     terms = [4 + k for k, name in enumerate(INTRINSIC_NAMES[4:]) if name in free]
     distortion = next((name for name, t in DISTORTION_TERMS.items() if t == terms), "auto")
     bias = [term for term, names in BIAS_TERMS if free.intersection(names)]
-    return {"distortion": distortion, "depth_bias": "+".join(bias) or "none"}
+    return {"distortion": distortion, "depth_bias": "+".join(bias) or "none", "plane_squares": result.plane_squares}
 
 
 def _dropped_corners(notes: list[str]) -> dict[int, list[int]]:
@@ -303,7 +304,8 @@ def _section_summary(result: CalibrationResult, views: Sequence[View], options: 
         ["method", _e(result.method)],
         ["image size", _e(f"{result.image_size[0]} x {result.image_size[1]} px")],
         ["depth convention", _e(result.depth_convention)],
-        ["model", _e(f"distortion {options['distortion']}, depth bias {options['depth_bias']}")],
+        ["model", _e(f"distortion {options['distortion']}, depth bias {options['depth_bias']}"
+                     + (f", planes on the {options['plane_squares']} squares" if result.method == "depth" else ""))],
         ["views used", _e(f"{len(result.views)} of {len(views)}")],
         ["pixel RMS", _e(f"{result.pixel_rms:.3f} px")],
         ["depth RMS", _e(f"{result.depth_rms * 1e3:.2f} mm" if np.isfinite(result.depth_rms) else "no depth")],
@@ -528,13 +530,13 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     intr = pack_intrinsics(result.K, result.D)
     conv, bias = result.depth_convention, result.depth_bias
     try:
-        samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude)
+        samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude, squares=result.plane_squares)
     except CalibrationError as exc:
         return f'<p class="note">View {d.index} cannot be planarized again: {_e(exc)}</p>'
     # As the calibration does: RANSAC against outliers, then the plane in bias-corrected depth.
-    inl = fit_samples(samples, intr, conv, ransac=True).inliers
-    u = directions(samples.pixels[inl], intr, conv)
-    plane = fit_plane_to(u, bias_model.true_depth(bias, samples.depth[inl], u), samples.pixels[inl])
+    inl = samples.subset(fit_samples(samples, intr, conv, ransac=True).inliers)
+    u = directions(inl.pixels, intr, conv)
+    plane = fit_plane_to(u, bias_model.true_depth(bias, inl.depth, u), inl.pixels, inl.black)
 
     def on_plane(pixels: np.ndarray) -> np.ndarray:
         """The depth the camera would report on the fitted plane (bias applied)."""
@@ -588,14 +590,15 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     ax.axhline(0, color="k", lw=0.5)
     rms = np.sqrt(np.nanmean(diff ** 2)) if np.isfinite(diff).any() else np.nan
     ax.set(xlabel="corner", ylabel="mm", title=f"raw − planarized at the corners, RMS {rms:.2f} mm")
-    text = (f"View {d.index}, the one with the most plane pixels: {len(plane.pixels)} white-square pixels fit the "
-            f"plane with σ {plane.sigma * 1e3:.2f} mm (bias-corrected depth); over the whole board area (black "
-            f"squares and edges included) raw − plane has a robust σ of {sigma:.2f} mm; at the {len(d.ids)} corners "
-            f"the raw depth differs from the planarized by {rms:.2f} mm RMS.")
-    return (f"<p>{_e(text)}</p>" + _figure(fig, "planarization", "Top: the raw depth over the board, the plane fitted "
-            "to its white squares (the depth the camera would report on it, bias included), and their difference, "
-            "corners dotted. Bottom: the corner depths the calibration uses (planarized) against the raw depth "
-            "there: the noise the planarization removes."))
+    fitted = "white-square pixels" if result.plane_squares == "white" else "pixels of both colours"
+    text = (f"View {d.index}, the one with the most plane pixels: {len(plane.pixels)} {fitted} fit the "
+            f"plane with σ {plane.sigma * 1e3:.2f} mm on the white squares (bias-corrected depth); over the "
+            f"whole board area (black squares and edges included) raw − plane has a robust σ of {sigma:.2f} mm; "
+            f"at the {len(d.ids)} corners the raw depth differs from the planarized by {rms:.2f} mm RMS.")
+    return (f"<p>{_e(text)}</p>" + _figure(fig, "planarization", "Top: the raw depth over the board, the plane "
+            f"fitted to its {result.plane_squares} squares (the depth the camera would report on it, bias "
+            "included), and their difference, corners dotted. Bottom: the corner depths the calibration uses "
+            "(planarized) against the raw depth there: the noise the planarization removes."))
 
 
 def _cmap(name: str):

@@ -75,9 +75,23 @@ class Board:
         pts[:, 1] = (idx // self.cols) * self.square
         return pts
 
+    def in_squared_area(self, x: np.ndarray, y: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """True where board-plane points (metres) lie on the squares, at least ``margin`` (a
+        fraction of a square) inside the pattern's outline."""
+        u = np.asarray(x, dtype=float) / self.square
+        v = np.asarray(y, dtype=float) / self.square
+        return (u >= margin - 1) & (u <= self.cols - margin) & (v >= margin - 1) & (v <= self.rows - margin)
+
     def is_white(self, x: np.ndarray, y: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """True where board-plane points (metres) lie on a white square, at least ``margin``
         (a fraction of the square) away from its edges and inside the squared area."""
+        return self._on_squares(x, y, margin, 1)
+
+    def is_black(self, x: np.ndarray, y: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """As ``is_white``, for the black squares."""
+        return self._on_squares(x, y, margin, 0)
+
+    def _on_squares(self, x: np.ndarray, y: np.ndarray, margin: float, parity: int) -> np.ndarray:
         u = np.asarray(x, dtype=float) / self.square
         v = np.asarray(y, dtype=float) / self.square
         i = np.floor(u)
@@ -86,4 +100,4 @@ class Board:
         fv = v - j
         inside = (i >= -1) & (i <= self.cols - 1) & (j >= -1) & (j <= self.rows - 1)
         away = (fu >= margin) & (fu <= 1 - margin) & (fv >= margin) & (fv <= 1 - margin)
-        return inside & away & ((i + j) % 2 == 1)
+        return inside & away & ((i + j) % 2 == parity)

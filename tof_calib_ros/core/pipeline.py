@@ -28,6 +28,7 @@ from .planarize import (
     DepthSamples,
     Plane,
     board_samples,
+    check_squares,
     corner_depth_along,
     directions,
     fit_plane_to,
@@ -242,7 +243,7 @@ def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndar
             floors.append(0.0)
             planes.append(None)
             continue
-        plane = fit_plane_to(su, bias_model.true_depth(bias, smp.depth, su), smp.pixels)
+        plane = fit_plane_to(su, bias_model.true_depth(bias, smp.depth, su), smp.pixels, smp.black)
         d, se = corner_depth_along(plane, u)
         depths.append(bias_model.measured(bias, d, u * d[:, None]))
         floors.append(float(np.median(se) * (1 + bias[1])))
@@ -316,19 +317,20 @@ def _std(fit: bundle.Fit) -> dict[str, float]:
 
 
 def _result(method, image_size, convention, fit, views, planes, rejected, notes,
-            trad: Traditional | None = None) -> CalibrationResult:
+            trad: Traditional | None = None, plane_squares: str = "white") -> CalibrationResult:
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
     corner_focal = None if trad is None else (*map(float, trad.intrinsics[:2]), *map(float, trad.focal_std))
     return CalibrationResult(method, image_size, convention, K, D, fit.state.bias.copy(), _std(fit),
-                             _report(views, fit, planes), rejected, notes, corner_focal)
+                             _report(views, fit, planes), rejected, notes, corner_focal, plane_squares)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
               depth_convention: str = "z", method: str = "depth", *, depth_units: float | None = None,
               depth_bias: str = "offset", distortion: str = "auto", loss: str | None = None,
-              min_views: int = 3, progress: Callable[[str], None] | None = None) -> CalibrationResult:
+              plane_squares: str = "white", min_views: int = 3,
+              progress: Callable[[str], None] | None = None) -> CalibrationResult:
     """Calibrate a ToF camera from checkerboard views.
 
     ``image_size`` is (width, height), taken from the depth images when not given.
@@ -337,7 +339,10 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     alongside ('none', or 'offset', 'scale', 'tilt' joined by '+'). ``distortion`` is 'auto'
     (as many plumb_bob terms as the corners support) or one of 'none', 'k1', 'k1k2',
     'plumb_bob' (k1 k2 p1 p2), 'full' (with k3). ``loss`` 'huber' or 'cauchy' makes the fit
-    robust to misdetected corners. Raises CalibrationError with the reason when
+    robust to misdetected corners. ``plane_squares`` is 'white' (the paper's: the depth plane is
+    fitted to the white squares, as real ToF cameras read black ones farther and noisier) or
+    'all' (the whole board, each colour with its own noise: a sensor that reads both colours
+    at the same range, such as the simulated one). Raises CalibrationError with the reason when
     the views cannot be calibrated; check ``result.verdict`` before trusting a result.
     """
     # The linear algebra here is small: BLAS threads only contend (with each other and with
@@ -345,7 +350,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     _check_arguments(views, board, image_size, depth_units, min_views, progress)
     with threadpool_limits(1):
         result = _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
-                            distortion, loss, min_views, progress)
+                            distortion, loss, plane_squares, min_views, progress)
         if loss is None:
             return result
         # A robust loss bounds a misdetected corner's pull but still lets it shape the first
@@ -356,7 +361,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
         cleaned = [View(v.depth, *_without(v, board, dropped.get(i, [])), v.amplitude)
                    for i, v in enumerate(views)]
         again = _calibrate(cleaned, board, image_size, depth_convention, method, depth_units, depth_bias,
-                           distortion, loss, min_views, progress)
+                           distortion, loss, plane_squares, min_views, progress)
         again.notes.append("dropped outlier corners (view: board indices): "
                            + "; ".join(f"{i}: {ids}" for i, ids in sorted(dropped.items())))
         return again
@@ -388,7 +393,7 @@ def _without(view: View, board: Board, drop: list[int]) -> tuple[np.ndarray | No
 
 
 def _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion, loss,
-               min_views, progress) -> CalibrationResult:
+               plane_squares, min_views, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
     convention = check_convention(depth_convention)
     if method not in ("depth", "traditional"):
@@ -396,6 +401,7 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
     bias_terms = [N_INTRINSICS + k for k in bias_model.parse(depth_bias)]
     if loss not in (None, "huber", "cauchy"):
         raise CalibrationError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
+    check_squares(plane_squares)
     prepared, rejected, image_size = _prepare(views, board, image_size, depth_units)
     say(f"{len(prepared)} of {len(views)} views have a board")
     _require(prepared, rejected, min_views, len(views))
@@ -427,9 +433,9 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
     first_planes = []
     for v in prepared:
         try:
-            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude)
+            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude, squares=plane_squares)
             plane = fit_samples(smp, first, convention, ransac=True)
-            samples.append(DepthSamples(smp.pixels[plane.inliers], smp.depth[plane.inliers]))
+            samples.append(smp.subset(plane.inliers))
             first_planes.append(plane)
         except CalibrationError as exc:
             samples.append(None)
@@ -485,4 +491,4 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         if np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
             break
-    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes, trad)
+    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes, trad, plane_squares)

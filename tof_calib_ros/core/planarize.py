@@ -5,6 +5,11 @@ the board is a plane. So: segment the white squares from the detected corners (t
 ones too, through the board homography), keep their inner part, drop invalid pixels and
 pixels on a steep depth gradient (flying pixels), back-project them, fit the plane by
 RANSAC + SVD, and read each corner's depth where its viewing ray meets that plane.
+
+Beyond the paper, ``squares="all"`` fits the plane to the whole board, each colour weighted
+by its own noise: for sensors that read both colours at the same range. Real ToF cameras
+do not (a Kinect v2 reads its black squares 4 mm farther), hence the paper's white squares
+by default.
 """
 from __future__ import annotations
 
@@ -19,6 +24,7 @@ from .camera import rays, undistort_normalized
 from .errors import CalibrationError
 
 MIN_PLANE_PIXELS = 30
+SQUARES = ("white", "all")
 
 
 @dataclass
@@ -31,7 +37,7 @@ class Plane:
 
     coef: np.ndarray
     covariance: np.ndarray  # 3x3, of coef
-    sigma: float            # std of the inliers' depth about the plane, metres
+    sigma: float            # std of the white-square inliers' depth about the plane, metres
     pixels: np.ndarray      # (M, 2) integer pixel coordinates (x, y) of the inliers
     inliers: np.ndarray     # (n_candidates,) bool
     n_candidates: int       # white-square pixels with valid depth before RANSAC
@@ -42,10 +48,19 @@ class Plane:
         return -self.coef / np.linalg.norm(self.coef)
 
 
-def white_square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, board: Board,
-                        params: np.ndarray, margin: float, amplitude: np.ndarray | None) -> np.ndarray:
-    """(M, 2) pixel coordinates (x, y) inside the white squares, ``margin`` squares off their edges.
+def check_squares(squares: str) -> str:
+    if squares not in SQUARES:
+        raise CalibrationError(f"plane_squares must be one of {', '.join(map(repr, SQUARES))}, got {squares!r}")
+    return squares
 
+
+def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, board: Board,
+                  params: np.ndarray, margin: float, amplitude: np.ndarray | None,
+                  squares: str = "white") -> tuple[np.ndarray, np.ndarray]:
+    """(M, 2) pixel coordinates (x, y) on the board and (M,) whether each is on a black square.
+
+    ``squares="white"``: inside the white squares, ``margin`` squares off their edges;
+    ``"all"``: anywhere on the squares, ``margin`` squares inside the pattern's outline.
     The board-to-image map is a homography on undistorted coordinates, so lens distortion is
     honoured. When the amplitude image is given, the brighter of the two square colourings is
     taken as white, which also covers boards whose colours are swapped by a 180 degree turn.
@@ -69,18 +84,24 @@ def white_square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.nda
     x0, y0 = np.maximum(np.floor(px.min(0) - pad), 0).astype(int)
     x1, y1 = np.minimum(np.ceil(px.max(0) + pad), [w - 1, h - 1]).astype(int)
     if x1 <= x0 or y1 <= y0:
-        return np.zeros((0, 2), dtype=int)
+        return np.zeros((0, 2), dtype=int), np.zeros(0, dtype=bool)
     xs, ys = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
     pix = np.column_stack([xs.ravel(), ys.ravel()]).astype(float)
     grid = _normalized_grid(tuple(map(float, params)), h, w)
     on_board = cv2.perspectiveTransform(grid[(ys * w + xs).ravel()][None], np.linalg.inv(H))[0]
-    white = board.is_white(on_board[:, 0], on_board[:, 1], margin)
+    bx, by = on_board[:, 0], on_board[:, 1]
+    white = board.is_white(bx, by, margin)
+    turned = False
     if amplitude is not None:
-        other = board.is_white(on_board[:, 0] + s, on_board[:, 1], margin)
+        other = board.is_white(bx + s, by, margin)
         a = amplitude[pix[:, 1].astype(int), pix[:, 0].astype(int)].astype(float)
         if white.any() and other.any() and np.nanmedian(a[other]) > np.nanmedian(a[white]):
-            white = other
-    return pix[white].astype(int)
+            white, turned = other, True
+    if squares == "white":
+        return pix[white].astype(int), np.zeros(int(white.sum()), dtype=bool)
+    on = board.in_squared_area(bx, by, margin)
+    lit = board.is_black(bx[on], by[on]) if turned else board.is_white(bx[on], by[on])
+    return pix[on].astype(int), ~lit
 
 
 @lru_cache(maxsize=4)
@@ -141,25 +162,29 @@ def _svd_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
 
 @dataclass
 class DepthSamples:
-    """One view's white-square pixels with usable depth: chosen once, re-fitted as K changes."""
+    """One view's board pixels with usable depth: chosen once, re-fitted as K changes."""
 
     pixels: np.ndarray   # (M, 2) float pixel coordinates (x, y)
     depth: np.ndarray    # (M,) metres, measured
+    black: np.ndarray    # (M,) bool: on a black square (only with squares="all")
+
+    def subset(self, keep: np.ndarray) -> DepthSamples:
+        return DepthSamples(self.pixels[keep], self.depth[keep], self.black[keep])
 
 
 def board_samples(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray,
-                  amplitude: np.ndarray | None = None, margin: float = 0.15) -> DepthSamples:
-    """The white squares' pixels that are valid (not 0 or NaN) and not on a depth step."""
-    pix = white_square_pixels(depth.shape, corners, ids, board, params, margin, amplitude)
+                  amplitude: np.ndarray | None = None, margin: float = 0.15, squares: str = "white") -> DepthSamples:
+    """The squares' pixels that are valid (not 0 or NaN) and not on a depth step."""
+    pix, black = square_pixels(depth.shape, corners, ids, board, params, margin, amplitude, squares)
     if len(pix):
         d = depth[pix[:, 1], pix[:, 0]]
         keep = np.isfinite(d) & (d > 0) & ~_steep(depth, pix)
-        pix, d = pix[keep], d[keep]
-    if len(pix) < MIN_PLANE_PIXELS:
+        pix, d, black = pix[keep], d[keep], black[keep]
+    if np.sum(~black) < MIN_PLANE_PIXELS:
         raise CalibrationError(
-            f"only {len(pix)} valid depth pixels on the white squares (need {MIN_PLANE_PIXELS}): "
+            f"only {np.sum(~black)} valid depth pixels on the white squares (need {MIN_PLANE_PIXELS}): "
             "depth invalid (0 or NaN) over the board, or the board is too small in the image")
-    return DepthSamples(pix.astype(float), d.astype(float))
+    return DepthSamples(pix.astype(float), d.astype(float), black)
 
 
 def directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.ndarray:
@@ -168,9 +193,12 @@ def directions(pixels: np.ndarray, params: np.ndarray, convention: str) -> np.nd
     return r if convention == "z" else r / np.linalg.norm(r, axis=1, keepdims=True)
 
 
-def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, float]:
+def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, black: np.ndarray,
+                     iterations: int = 5) -> tuple[np.ndarray, np.ndarray, float]:
     """Least squares in depth (ToF noise is along the ray, not isotropic as a 3D fit assumes):
-    Gauss-Newton on depth - 1 / (coef . u), started from the linear fit of 1 / depth."""
+    Gauss-Newton on depth - 1 / (coef . u), started from the linear fit of 1 / depth. Black
+    squares, when sampled, return less light: each colour counts with its own noise, taken
+    from its residuals at every step. Returns the white squares' noise."""
     A = u * (depth ** 2)[:, None]
     try:
         coef = np.linalg.solve(A.T @ A, A.T @ depth)  # 3 unknowns: normal equations are well posed
@@ -178,7 +206,8 @@ def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> t
             s = u @ coef
             J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
             r = depth - 1.0 / s
-            step = np.linalg.solve(J.T @ J, -J.T @ r)
+            Jw = J / _colour_noise(r, black)[:, None] ** 2
+            step = np.linalg.solve(Jw.T @ J, -Jw.T @ r)
             coef = coef + step
             if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
                 break
@@ -187,9 +216,21 @@ def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, iterations: int = 5) -> t
     s = u @ coef
     r = depth - 1.0 / s
     J = u / s[:, None] ** 2
-    sigma = float(np.sqrt(r @ r / max(len(r) - 3, 1)))
-    cov = np.linalg.pinv(J.T @ J) * sigma ** 2
-    return coef, cov, sigma
+    sigma = _colour_noise(r, black)
+    cov = np.linalg.pinv((J / sigma[:, None] ** 2).T @ J)
+    return coef, cov, float(np.max(sigma, initial=0.0, where=~black))
+
+
+def _colour_noise(r: np.ndarray, black: np.ndarray) -> np.ndarray:
+    """Each sample's depth noise: its colour's residual RMS, less the plane's 3 degrees of
+    freedom (shared by the colours in proportion to their counts)."""
+    n = len(r)
+    sigma = np.empty(n)
+    for colour in (~black, black):
+        m = int(colour.sum())
+        if m:
+            sigma[colour] = np.sqrt(r[colour] @ r[colour] / max(m * (n - 3) / n, 1))
+    return np.maximum(sigma, 1e-15)
 
 
 def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, ransac: bool = True,
@@ -199,16 +240,17 @@ def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, rans
     already cleaned of outliers, only the latter."""
     u = directions(samples.pixels, params, convention)
     if not ransac:
-        return fit_plane_to(u, samples.depth, samples.pixels)
+        return fit_plane_to(u, samples.depth, samples.pixels, samples.black)
     inliers = ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed))
-    plane = fit_plane_to(u[inliers], samples.depth[inliers], samples.pixels[inliers])
+    plane = fit_plane_to(u[inliers], samples.depth[inliers], samples.pixels[inliers], samples.black[inliers])
     plane.inliers, plane.n_candidates = inliers, len(u)
     return plane
 
 
-def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray) -> Plane:
-    """The least-squares plane in depth through samples along known directions."""
-    coef, cov, sigma = _fit_depth_plane(directions, depth)
+def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray, black: np.ndarray) -> Plane:
+    """The least-squares plane in depth through samples along known directions (``black``:
+    which lie on black squares)."""
+    coef, cov, sigma = _fit_depth_plane(directions, depth, black)
     return Plane(coef, cov, sigma, pixels.astype(int), np.ones(len(depth), dtype=bool), len(depth))
 
 
@@ -231,9 +273,9 @@ def corner_depth_along(plane: Plane, u: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 def planarize(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray,
               convention: str, amplitude: np.ndarray | None = None, margin: float = 0.15,
-              seed: int = 0) -> tuple[np.ndarray, Plane]:
+              seed: int = 0, squares: str = "white") -> tuple[np.ndarray, Plane]:
     """Denoised depth at each corner (metres, the given convention) and the fitted plane."""
-    samples = board_samples(depth, corners, ids, board, params, amplitude, margin)
+    samples = board_samples(depth, corners, ids, board, params, amplitude, margin, squares)
     plane = fit_samples(samples, params, convention, True, seed)
     return corner_depth(plane, corners, params, convention)[0], plane
 

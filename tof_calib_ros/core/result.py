@@ -47,6 +47,7 @@ class CalibrationResult:
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     corner_focal: tuple[float, float, float, float] | None = None   # fx, fy, std fx, std fy from the corners alone
+    plane_squares: str = "white"  # the squares the depth planes were fitted to, see calibrate()
 
     @property
     def depth_offset(self) -> float:
@@ -100,6 +101,7 @@ class CalibrationResult:
             "image_width": int(self.image_size[0]),
             "image_height": int(self.image_size[1]),
             "depth_convention": self.depth_convention,
+            "plane_squares": self.plane_squares,
             "camera_matrix": self.K.tolist(),
             "distortion_model": "plumb_bob",
             "distortion_coefficients": self.D.tolist(),
