@@ -200,13 +200,14 @@ def _fit_depth_plane(u: np.ndarray, depth: np.ndarray, black: np.ndarray,
     squares, when sampled, return less light: each colour counts with its own noise, taken
     from its residuals at every step. Returns the white squares' noise."""
     A = u * (depth ** 2)[:, None]
+    weighted = black.any()
     try:
         coef = np.linalg.solve(A.T @ A, A.T @ depth)  # 3 unknowns: normal equations are well posed
         for _ in range(iterations):
             s = u @ coef
             J = u / s[:, None] ** 2          # d(depth - 1/s)/d(coef)
             r = depth - 1.0 / s
-            Jw = J / _colour_noise(r, black)[:, None] ** 2
+            Jw = J / _colour_noise(r, black)[:, None] ** 2 if weighted else J
             step = np.linalg.solve(Jw.T @ J, -Jw.T @ r)
             coef = coef + step
             if np.linalg.norm(step) < 1e-12 * np.linalg.norm(coef):
@@ -225,6 +226,8 @@ def _colour_noise(r: np.ndarray, black: np.ndarray) -> np.ndarray:
     """Each sample's depth noise: its colour's residual RMS, less the plane's 3 degrees of
     freedom (shared by the colours in proportion to their counts)."""
     n = len(r)
+    if not black.any():   # the white squares alone (the default): one noise, found at once
+        return np.full(n, max(np.sqrt(r @ r / max(n - 3, 1)), 1e-15))
     sigma = np.empty(n)
     for colour in (~black, black):
         m = int(colour.sum())
