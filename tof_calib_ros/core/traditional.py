@@ -18,18 +18,16 @@ class Traditional:
     intrinsics: np.ndarray
     poses: np.ndarray  # (V, 6) rvec, tvec
     rms: float
-    focal_std: np.ndarray  # (2,) OpenCV's standard deviations of fx, fy (inf when it gives none)
 
 
 def calibrate_opencv(object_points: list[np.ndarray], pixels: list[np.ndarray],
                      image_size: tuple[int, int], flags: int = OPENCV_FLAGS) -> Traditional:
-    """cv2.calibrateCameraExtended, with its refusals and divergences turned into CalibrationError."""
+    """cv2.calibrateCamera, with its refusals and divergences turned into CalibrationError."""
     w, h = image_size
     obj = [np.asarray(o, dtype=np.float32).reshape(-1, 1, 3) for o in object_points]
     img = [np.asarray(p, dtype=np.float32).reshape(-1, 1, 2) for p in pixels]
     try:
-        rms, K, D, rvecs, tvecs, std, _, _ = cv2.calibrateCameraExtended(obj, img, (int(w), int(h)), None, None,
-                                                                         flags=flags)
+        rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img, (int(w), int(h)), None, None, flags=flags)
     except cv2.error as exc:
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unknown error"
         raise CalibrationError(f"OpenCV calibration refused the views: {reason}") from exc
@@ -48,6 +46,4 @@ def calibrate_opencv(object_points: list[np.ndarray], pixels: list[np.ndarray],
     rms_ours = float(np.sqrt(np.mean(np.concatenate(err) ** 2) * 2))
     if not np.isfinite(rms_ours) or rms_ours > 10.0:
         raise CalibrationError(f"OpenCV calibration diverged (re-projection RMS {rms_ours:.1f} px)")
-    focal_std = np.asarray(std, dtype=float).ravel()[:2]
-    focal_std = np.where(np.isfinite(focal_std) & (focal_std > 0), focal_std, np.inf)
-    return Traditional(intr, poses, rms_ours, focal_std)
+    return Traditional(intr, poses, rms_ours)
