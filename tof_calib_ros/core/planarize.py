@@ -226,8 +226,6 @@ def _colour_noise(r: np.ndarray, black: np.ndarray) -> np.ndarray:
     """Each sample's depth noise: its colour's residual RMS, less the plane's 3 degrees of
     freedom (shared by the colours in proportion to their counts)."""
     n = len(r)
-    if not black.any():   # the white squares alone (the default): one noise, found at once
-        return np.full(n, max(np.sqrt(r @ r / max(n - 3, 1)), 1e-15))
     sigma = np.empty(n)
     for colour in (~black, black):
         m = int(colour.sum())
