@@ -54,9 +54,10 @@ import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.calibration_file import load_views, write_calibration
-from tof_calib_ros.collector import BoardTracker, CollectorConfig, ViewCollector, accurate_detect, quick_locate
+from tof_calib_ros.collector import CollectorConfig, ViewCollector
 from tof_calib_ros.core.detection import detect
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
+from tof_calib_ros.tracking import BoardTracker, accurate_detect, quick_locate
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BOARD = Board(5, 7, 0.03)

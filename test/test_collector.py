@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tof_calib_ros import Board, calibrate, collector, sim
+from tof_calib_ros import Board, calibrate, sim, tracking
 from tof_calib_ros.collector import AXES, CollectorConfig, ViewCollector
 from tof_calib_ros.core.camera import rays
 
@@ -128,7 +128,7 @@ def test_another_image_size_is_rejected_until_reset(sweep_frames):
 
 
 def test_memory_is_bounded_and_views_are_copies(sweep_frames, monkeypatch):
-    cache, detect = {}, collector.detect
+    cache, detect = {}, tracking.detect
 
     def cached_detect(image, board, **options):  # the same few images 500 times: detect each once
         key = (image.tobytes(), image.shape, tuple(sorted(options.items())))
@@ -136,7 +136,7 @@ def test_memory_is_bounded_and_views_are_copies(sweep_frames, monkeypatch):
             cache[key] = detect(image, board, **options)
         return cache[key]
 
-    monkeypatch.setattr(collector, "detect", cached_detect)
+    monkeypatch.setattr(tracking, "detect", cached_detect)
     frames = sweep_frames[:10]  # 5 poses
     col = ViewCollector(BOARD)
     for i in range(500):

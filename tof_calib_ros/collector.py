@@ -28,10 +28,11 @@ import cv2
 import numpy as np
 
 from .core.board import Board
-from .core.detection import UPSCALE_BELOW, Detection, detect, locate, tone_map
+from .core.detection import Detection
 from .core.errors import CalibrationError
 from .core.pipeline import View, depth_in_metres, depth_units
 from .core.planarize import sample_depth
+from .tracking import accurate_detect, quick_locate
 
 AXES = ("x", "y", "size", "skew", "depth", "tilt")
 # Small values are no achievement on these axes (camera_calibration: size and skew), so their
@@ -42,15 +43,6 @@ _FROM_ZERO = {"size", "skew", "tilt"}
 EDGE_SQUARES = 0.5
 # The quick corners are pixel-accurate; farther from the accurate ones, one of them is wrong.
 QUICK_AGREEMENT_PX = 1.5
-# quick_locate(near=...): a corner followed from the previous frame may move this many squares
-# and lie this many squares off the grid; the light squares must be this many grey levels (of 255)
-# above the dark ones. The detector then searches NEAR_MARGIN_SQUARES squares around the previous
-# corners (one for the outer squares, one for motion) plus a few pixels for its border.
-FOLLOW_MAX_MOVE = 0.5
-FOLLOW_GRID_TOLERANCE = 0.25
-FOLLOW_MIN_CONTRAST = 20.0
-NEAR_MARGIN_SQUARES = 2.0
-NEAR_MARGIN_PX = 4.0
 
 
 def _real(value: object) -> bool:
@@ -290,145 +282,6 @@ class ViewCollector:
         depth = (np.nanmedian(z) - near) / (far - near)
         tilt = _tilt_deg(corners, z, self.board, w, h) / cfg.max_tilt_deg
         return np.clip(np.array([x, y, size, skew, depth, tilt], dtype=float), 0.0, 1.0)
-
-
-# While the board is not found, the whole image (50 to 90 ms at 640x576 when it holds no board
-# the detector sees) is searched every this many frames, and only where the board was last seen
-# in between: a board lost from sight is found again at most this many frames late (0.2 s at 15 fps).
-WHOLE_IMAGE_EVERY = 4
-
-
-def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = None,
-                 before: np.ndarray | None = None, whole_image: bool = True) -> Detection:
-    """The quick corners ``add`` judges a frame by, with a blank or constant frame as a miss.
-
-    ``near``: the corners last seen, when the caller keeps them (offline replay), and ``before``
-    the ones of the frame before those. A board held still or moved smoothly is then
-    followed (``_follow``, about 1 ms where the detector takes 10 to 60 ms): from where its
-    motion so far puts it, then from where it was. Failing that, the detector looks in the
-    region around both (its cost grows with the area searched), and then, unless
-    ``whole_image`` is False, in the whole image: with no ``near``, that is the only search.
-    """
-    if near is not None:
-        square = _square_px(near, board)
-        starts = [near] if before is None else [2 * near - before, near]
-        for start in starts:
-            followed = _follow(amplitude, board, start, square)
-            if followed is not None:
-                return Detection(followed, "followed from where it was last seen")
-        (x0, y0), (x1, y1) = _region(np.concatenate(starts), NEAR_MARGIN_SQUARES * square + NEAR_MARGIN_PX,
-                                     amplitude.shape)
-        if x1 > x0 and y1 > y0:
-            found = quick_locate(amplitude[y0:y1 + 1, x0:x1 + 1], board)
-            if found.corners is not None:
-                return Detection(found.corners + np.array([x0, y0], dtype=float), found.message)
-        if not whole_image:
-            return Detection(None, f"no {board.cols}x{board.rows} board found where it was last seen")
-    elif not whole_image:
-        return Detection(None, f"no {board.cols}x{board.rows} board seen lately: the whole image is searched "
-                               f"every {WHOLE_IMAGE_EVERY} frames")
-    try:
-        return locate(amplitude, board)
-    except CalibrationError as exc:
-        return Detection(None, str(exc))
-
-
-class BoardTracker:
-    """Where to look for the board in a stream of frames: where it was last seen (its motion
-    extrapolated when it was seen in the frame before too, ``quick_locate``); while it is not
-    found, the whole image is searched only every ``WHOLE_IMAGE_EVERY`` frames."""
-
-    def __init__(self, board: Board) -> None:
-        self.board = board
-        self.forget()
-
-    def forget(self) -> None:
-        """Start afresh (a reset, a frame that could not be read)."""
-        self._seen = self._before = None   # the corners last seen, and the frame's before them when consecutive
-        self._misses = 0                   # frames since the board was last seen
-
-    def locate(self, amplitude: np.ndarray) -> Detection:
-        found = quick_locate(amplitude, self.board, self._seen, self._before,
-                             whole_image=self._misses % WHOLE_IMAGE_EVERY == 0)
-        if found.corners is None:
-            self._before = None
-            self._misses += 1
-        else:
-            self._before, self._seen = (self._seen if self._misses == 0 else None), found.corners
-            self._misses = 0
-        return found
-
-
-def accurate_detect(amplitude: np.ndarray, board: Board, quick: np.ndarray, in_region: bool) -> Detection:
-    """``detect``'s accurate corners of a frame whose quick corners are ``quick``: in the whole
-    image, or (``in_region``) in the region around the quick corners, with the whole image's
-    choice of upscaling. On a 640x576 image the region takes a tenth of the time, and its
-    tone mapping, fitted to the board rather than the whole scene, gave corners nearer the truth
-    on rendered views (0.08 against 0.13 px RMS; the same at 200x200)."""
-    if not in_region:
-        return detect(amplitude, board)
-    margin = NEAR_MARGIN_SQUARES * _square_px(quick, board) + NEAR_MARGIN_PX
-    (x0, y0), (x1, y1) = _region(quick, margin, amplitude.shape)
-    found = detect(amplitude[y0:y1 + 1, x0:x1 + 1], board, upscale=min(amplitude.shape) < UPSCALE_BELOW)
-    return found if found.corners is None else Detection(found.corners + np.array([x0, y0], dtype=float),
-                                                         found.message)
-
-
-def _square_px(corners: np.ndarray, board: Board) -> float:
-    """The board's square size in the image, pixels (the longer of the two directions)."""
-    grid = corners.reshape(board.rows, board.cols, 2)
-    return max(float(np.median(np.linalg.norm(np.diff(grid, axis=k), axis=2))) for k in (0, 1))
-
-
-def _region(corners: np.ndarray, margin: float, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Top-left and bottom-right pixel of the corners' bounding box widened by ``margin``, in the image."""
-    h, w = shape
-    return (np.maximum(np.floor(corners.min(axis=0) - margin), 0).astype(int),
-            np.minimum(np.ceil(corners.max(axis=0) + margin), [w - 1, h - 1]).astype(int))
-
-
-def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: float) -> np.ndarray | None:
-    """The corners refined (cornerSubPix) from where they are expected, or None unless they are
-    surely the board's: no corner moved more than ``FOLLOW_MAX_MOVE`` squares, every one lies
-    on the grid a homography through all of them predicts, and the squares around them, the outer
-    ones included, alternate light and dark. A grid that slipped by a square fails the last test:
-    its outer squares fall on the board's margin."""
-    h, w = amplitude.shape
-    if not np.all((previous >= 0) & (previous <= [w - 1, h - 1])):   # expected partly off the image
-        return None
-    (x0, y0), (x1, y1) = _region(previous, 1.5 * square + NEAR_MARGIN_PX, amplitude.shape)
-    half = int(np.clip(round(0.35 * square), 2, 15))   # as detection's cornerSubPix window
-    if min(x1 - x0, y1 - y0) < 2 * half + 5:
-        return None
-    try:
-        image = tone_map(amplitude[y0:y1 + 1, x0:x1 + 1]).astype(np.float32)
-    except CalibrationError:   # a constant region: nothing to follow
-        return None
-    origin = np.array([x0, y0], dtype=float)
-    pts = (previous - origin).astype(np.float32).reshape(-1, 1, 2)
-    cv2.cornerSubPix(image, pts, (half, half), (-1, -1),
-                     (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01))
-    local = pts.reshape(-1, 2).astype(np.float64)
-    if not np.all(np.isfinite(local)) or \
-            np.linalg.norm(local + origin - previous, axis=1).max() > FOLLOW_MAX_MOVE * square:
-        return None
-    ids = np.arange(board.n_corners)
-    grid = np.column_stack([ids % board.cols, ids // board.cols]).astype(float)   # in squares
-    H, _ = cv2.findHomography(grid, local, 0)
-    if H is None or np.linalg.norm(cv2.perspectiveTransform(grid[None], H)[0] - local, axis=1).max() \
-            > FOLLOW_GRID_TOLERANCE * square:
-        return None
-    i, j = np.meshgrid(np.arange(-1, board.cols) + 0.5, np.arange(-1, board.rows) + 0.5)
-    centres = cv2.perspectiveTransform(np.column_stack([i.ravel(), j.ravel()])[None], H)[0].astype(np.float32)
-    if np.any(centres < 0) or np.any(centres > [image.shape[1] - 1, image.shape[0] - 1]):
-        return None
-    level = cv2.remap(image, centres[None, :, 0], centres[None, :, 1], cv2.INTER_LINEAR).ravel()
-    even = (np.floor(i) + np.floor(j)).ravel() % 2 == 0
-    light, dark = (level[even], level[~even]) if level[even].mean() > level[~even].mean() else \
-        (level[~even], level[even])
-    if not light.min() - dark.max() > FOLLOW_MIN_CONTRAST:
-        return None
-    return local + origin
 
 
 def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) -> float:

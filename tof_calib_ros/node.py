@@ -48,10 +48,11 @@ from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagSource
 from .calibration_file import EncodedViews, encode_views, write_calibration
 from .calibration_worker import CalibrationWorker
-from .collector import BoardTracker, CollectorConfig, ViewCollector
+from .collector import CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .replay import FrameError, Skip, decode_sized
 from .stamp_sync import StampSync
+from .tracking import BoardTracker
 
 COMMIT_TIMEOUT_S = 5.0
 # how a user of the node names the bag's topics, for the errors of bag_io.choose_topics
