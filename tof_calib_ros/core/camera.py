@@ -104,14 +104,20 @@ def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float =
     if not np.any(D):
         return xy
     scale = np.array([fx, fy])
+    # Each point is its own Newton problem: only those not yet converged are iterated (where the
+    # model folds, near the corners of wide images, a few never converge and would otherwise keep
+    # the whole image iterating to max_iter: 0.4 s for a 512x424 image).
+    active = np.arange(len(xy))
     for _ in range(max_iter):
-        xd, yd, dxy, _ = _distort(xy[:, 0], xy[:, 1], D, True)
-        err = np.stack([xd, yd], axis=1) - target
-        if np.all(np.abs(err * scale) < tol_px):
+        xd, yd, dxy, _ = _distort(xy[active, 0], xy[active, 1], D, True)
+        err = np.stack([xd, yd], axis=1) - target[active]
+        moving = ~np.all(np.abs(err * scale) < tol_px, axis=1)
+        if not moving.any():
             break
+        active, err, dxy = active[moving], err[moving], dxy[moving]
         a, b, c, d = dxy[:, 0, 0], dxy[:, 0, 1], dxy[:, 1, 0], dxy[:, 1, 1]
         det = a * d - b * c
-        xy = xy - np.stack([d * err[:, 0] - b * err[:, 1], a * err[:, 1] - c * err[:, 0]], axis=1) / det[:, None]
+        xy[active] -= np.stack([d * err[:, 0] - b * err[:, 1], a * err[:, 1] - c * err[:, 0]], axis=1) / det[:, None]
     return xy
 
 
