@@ -223,8 +223,16 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
            convention: str = "z", noise: Noise | None = None, rng: RngLike = None,
            border: float = 1.0, background: float | None = 3.0, flying_pixels: bool = True,
            supersample: int = 4, reflectivity: tuple[float, float, float] = (0.9, 0.1, 0.05),
-           gain: float = 0.6, dtype: type = np.uint16, invalid: float = np.nan) -> Frame:
+           gain: float = 0.6, dtype: type = np.uint16, invalid: float = np.nan,
+           moving_to: tuple[np.ndarray, np.ndarray] | None = None) -> Frame:
     """Render the board at pose (rvec, tvec) (board frame -> camera frame, metres).
+
+    ``moving_to``: the pose at the end of the exposure, for a board that moves while the frame
+    is taken. A multi-phase ToF camera takes ``PHASES`` correlation samples one after another
+    and computes amplitude and depth from all of them (``_demodulate``): the amplitude is
+    blurred along the motion, and where a sample sees another surface or another brightness
+    than the rest (the squares' edges, the board's outline) the depth is wrong, as on real
+    sensors. The frame's truth (``corners``, ``rvec``, ``tvec``) is the mid-exposure pose.
 
     ``border``: white margin around the squares, in squares. ``background``: distance (m) of a
     frontal far wall, or None for no return (amplitude 0, depth invalid). ``reflectivity``:
@@ -249,6 +257,75 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
         raise CalibrationError(f"gain must be positive, got {gain}")
     if not (np.isnan(invalid) or invalid == 0):
         raise CalibrationError(f"invalid depth must be NaN or 0, got {invalid}")
+    if moving_to is None:
+        amp, depth_true, cov = _surfaces(camera, board, rvec, tvec, conv, border, background, flying_pixels, S,
+                                         reflectivity)
+        pose = (np.asarray(rvec, dtype=float).reshape(3), np.asarray(tvec, dtype=float).reshape(3))
+    else:
+        n = PHASES * INSTANTS
+        instants = [_surfaces(camera, board, *between((rvec, tvec), moving_to, (k + 0.5) / n), conv, border,
+                              background, flying_pixels, S, reflectivity) for k in range(n)]
+        samples = [_integrate(instants[k * INSTANTS:(k + 1) * INSTANTS]) for k in range(PHASES)]
+        amp, depth_true = _demodulate(samples)
+        cov = np.mean([c for *_, c in samples], axis=0)
+        pose = between((rvec, tvec), moving_to, 0.5)
+    return _sense(camera, board, pose, conv, (amp, depth_true, cov), noise, gen, reflectivity[0], gain, dtype,
+                  invalid)
+
+
+def between(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray],
+            t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pose a fraction ``t`` of the way from a to b (rotation along the shortest arc)."""
+    Ra, Rb = cv2.Rodrigues(np.asarray(a[0], dtype=float).reshape(3, 1))[0], \
+        cv2.Rodrigues(np.asarray(b[0], dtype=float).reshape(3, 1))[0]
+    step = cv2.Rodrigues(Ra.T @ Rb)[0].ravel() * t
+    return (cv2.Rodrigues(Ra @ cv2.Rodrigues(step)[0])[0].ravel(),
+            (1 - t) * np.asarray(a[1], dtype=float).reshape(3) + t * np.asarray(b[1], dtype=float).reshape(3))
+
+
+# A multi-phase ToF camera: four correlation samples per frame, taken one after another, at a
+# modulation frequency whose unambiguous range (c / 2f = 5 m) covers the scene. Each sample
+# integrates the scene over its part of the exposure, rendered at INSTANTS moments.
+PHASES = 4
+INSTANTS = 2
+UNAMBIGUOUS_RANGE_M = 5.0
+
+
+def _integrate(instants: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One correlation sample's amplitude, depth and coverage from the moments it integrates:
+    the depth is the amplitude-weighted phasor mean of what each moment saw."""
+    amps = np.stack([a for a, _, _ in instants])
+    depths = np.stack([d for _, d, _ in instants])
+    seen = np.isfinite(depths)
+    phasor = np.sum(np.where(seen, amps * np.exp(2j * np.pi * np.where(seen, depths, 0.0) / UNAMBIGUOUS_RANGE_M),
+                             0.0), axis=0)
+    depth = np.mod(np.angle(phasor), 2 * np.pi) * UNAMBIGUOUS_RANGE_M / (2 * np.pi)
+    return (amps.mean(axis=0), np.where(seen.any(axis=0), depth, np.nan),
+            np.mean([c for *_, c in instants], axis=0))
+
+
+def _demodulate(samples: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Amplitude and depth from ``PHASES`` samples (amplitude, depth) taken at different times:
+    sample k correlates a * cos(phi + k 2 pi / PHASES), phi = 2 pi d / range; the camera reads
+    phi back from all of them, so a pixel whose samples disagree gets a depth no surface has."""
+    amps = np.stack([a for a, _, _ in samples])
+    depths = np.stack([d for _, d, _ in samples])
+    seen = np.isfinite(depths)
+    a = np.where(seen, amps, 0.0)
+    phi = 2 * np.pi * np.where(seen, depths, 0.0) / UNAMBIGUOUS_RANGE_M
+    shift = 2 * np.pi * np.arange(PHASES)[:, None, None] / PHASES
+    c = a * np.cos(phi + shift)
+    real = np.sum(c * np.cos(shift), axis=0)
+    imag = -np.sum(c * np.sin(shift), axis=0)
+    depth = np.mod(np.arctan2(imag, real), 2 * np.pi) * UNAMBIGUOUS_RANGE_M / (2 * np.pi)
+    return amps.mean(axis=0), np.where(seen.any(axis=0), depth, np.nan)
+
+
+def _surfaces(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, conv: str, border: float,
+              background: float | None, flying_pixels: bool, S: int,
+              reflectivity: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noiseless amplitude (albedo * cos / r^2, anti-aliased), depth (NaN: no return) and board
+    coverage of each pixel at a pose."""
     refl_w, refl_b, refl_bg = (float(r) for r in reflectivity)
     R, t = _plane(rvec, tvec)
     W, H = camera.width, camera.height
@@ -315,10 +392,20 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
         if flying_pixels:
             mixed = (cov > 0) & (cov < 1) & np.isfinite(board_depth)
             depth_true = np.where(mixed, cov * board_depth + (1 - cov) * wall_depth, depth_true)
-    valid = np.isfinite(depth_true)
+    return amp, depth_true, cov
 
-    # Sensor errors. Draws happen in a fixed order so a seed always gives the same frame.
-    a_ref = refl_w  # a white square 1 m away, facing the camera
+
+def _sense(camera: SimCamera, board: Board, pose: tuple[np.ndarray, np.ndarray], conv: str,
+           surfaces: tuple[np.ndarray, np.ndarray, np.ndarray], noise: Noise, gen: np.random.Generator,
+           a_ref: float, gain: float, dtype: type, invalid: float) -> Frame:
+    """The sensor's errors on the noiseless images (``_surfaces``), and the frame's truth at ``pose``.
+
+    ``a_ref``: the amplitude of a white square 1 m away, facing the camera."""
+    amp, depth_true, cov = surfaces
+    H, W = amp.shape
+    rvec, tvec = pose
+    valid = np.isfinite(depth_true)
+    # Draws happen in a fixed order so a seed always gives the same frame.
     depth = depth_true + noise.offset
     if noise.wiggle_amplitude > 0:
         depth = depth + noise.wiggle_amplitude * np.sin(
@@ -347,12 +434,12 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
     corners = cam.project(X, camera.params).pixels
     corner_depth, _ = cam.depth_of(X, conv)
     return Frame(amplitude=amplitude, depth=depth, corners=corners, corner_depth=corner_depth,
-                 rvec=np.asarray(rvec, dtype=float).reshape(3).copy(), tvec=t.copy(),
+                 rvec=np.asarray(rvec, dtype=float).reshape(3).copy(), tvec=np.asarray(tvec, dtype=float).copy(),
                  K=camera.K, D=camera.D, convention=conv, depth_true=depth_true,
                  coverage=cov.astype(np.float32))
 
 
-def _board_outline(board: Board, border: float, per_edge: int = 16) -> np.ndarray:
+def board_outline(board: Board, border: float, per_edge: int = 16) -> np.ndarray:
     """Points along the outline of the board ``border`` squares beyond the interior corners
     (edges are sampled because distortion bends them)."""
     sq = board.square
@@ -401,7 +488,7 @@ def random_poses(camera: SimCamera, board: Board, n: int, rng: RngLike = None, *
         raise CalibrationError(f"distance range must be positive and ordered, got {distance}")
     if not (0 <= max_tilt_deg < 90):
         raise CalibrationError(f"max tilt must be in [0, 90) degrees, got {max_tilt_deg}")
-    outline = _board_outline(board, view_border)
+    outline = board_outline(board, view_border)
     centre = np.array([(board.cols - 1) / 2 * board.square, (board.rows - 1) / 2 * board.square, 0])
     W, H = camera.width, camera.height
     poses: list[tuple[np.ndarray, np.ndarray]] = []

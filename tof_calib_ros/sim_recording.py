@@ -1,10 +1,18 @@
 """A recording of the simulated ToF camera in a bag, with its ground truth in a sidecar file:
 for demos, tests and bug reports, with no camera and no ROS.
 
-The board moves as a person moves it for calibration: held still at a pose for ``hold`` frames,
-then carried to the next over ``transit`` frames (the collector rejects those as moving). The
-scene is the one ``tof_sim_node`` publishes: the same renderer, noise, distances and tilts, and
-a camera_info with the true intrinsics, a factory calibration 4 % off, or none.
+Two ways to move the board. ``motion="hold"``: as a person who knows the tool moves it, held
+still at a pose for ``hold`` frames, then carried to the next over ``transit`` frames.
+``motion="continuous"``: as most people record, the board never stops: it enters the image from
+the side (the first frames are partial), then sweeps from pose to pose, one every ``segment``
+seconds, faster between poses than near them; each frame is exposed for ``exposure`` seconds
+while the board moves, so the fast frames are blurred and their depth smeared as a multi-phase
+ToF camera smears it (``sim.render(moving_to=...)``). ``lead_in`` frames without a board come
+first in either mode. The truth file lists, per frame, whether the whole board is in view and by
+how many pixels its corners moved during the exposure.
+
+The scene is the one ``tof_sim_node`` publishes: the same renderer, noise, distances and tilts,
+and a camera_info with the true intrinsics, a factory calibration 4 % off, or none.
 """
 from __future__ import annotations
 
@@ -23,6 +31,7 @@ from .core.errors import CalibrationError
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 CAMERA_INFO_MODES = ("factory", "true", "none")
+MOTIONS = ("hold", "continuous")
 DEPTH_ENCODINGS = ("16UC1", "32FC1")
 FACTORY_ERROR = 1.04   # the factory camera_info's focal length is 4 % off, as sim_node's
 TOPICS = {"amplitude": "/tof/amplitude/image_raw", "depth": "/tof/depth/image_raw",
@@ -39,6 +48,10 @@ class Scene:
     rate: float = 15.0
     hold: int = 8
     transit: int = 8
+    motion: str = "hold"
+    segment: float = 1.5
+    exposure: float = 0.01
+    lead_in: int = 0
     depth_convention: str = "z"
     depth_encoding: str = "16UC1"
     depth_offset: float = 0.02
@@ -52,6 +65,11 @@ class Scene:
             (self.rate > 0, f"rate must be positive, not {self.rate}"),
             (self.hold >= 1, f"hold must be at least 1 frame, not {self.hold}"),
             (self.transit >= 0, f"transit must not be negative, not {self.transit}"),
+            (self.motion in MOTIONS, f"motion must be one of {', '.join(MOTIONS)}, not {self.motion!r}"),
+            (self.segment > 0, f"segment must be positive seconds, not {self.segment}"),
+            (0 <= self.exposure < 1 / self.rate if self.rate > 0 else False,
+             f"exposure must be at least 0 and shorter than a frame (1/rate), not {self.exposure}"),
+            (self.lead_in >= 0, f"lead_in must not be negative, not {self.lead_in}"),
             (self.depth_convention in ("z", "radial"),
              f"depth convention must be 'z' or 'radial', not {self.depth_convention!r}"),
             (self.depth_encoding in DEPTH_ENCODINGS,
@@ -68,28 +86,83 @@ class Scene:
         return CAMERAS[self.camera]()
 
 
-def _between(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], t: float):
-    """The pose a fraction ``t`` of the way from a to b (rotation along the shortest arc)."""
-    Ra, Rb = cv2.Rodrigues(a[0])[0], cv2.Rodrigues(b[0])[0]
-    step = cv2.Rodrigues(Ra.T @ Rb)[0].ravel() * t
-    return cv2.Rodrigues(Ra @ cv2.Rodrigues(step)[0])[0].ravel(), (1 - t) * a[1] + t * b[1]
+# The board's outline this many squares beyond the outer corners, this many pixels inside the
+# image, is "the whole board" in the truth file: the collector's own rule (EDGE_SQUARES, border_px).
+WHOLE_EDGE_SQUARES = 0.5
+WHOLE_MARGIN_PX = 2.0
+# Continuous motion: the speed along a segment varies as 1 - SWEEP_VARIATION cos(2 pi s), never 0.
+SWEEP_VARIATION = 0.7
+Pose = tuple[np.ndarray, np.ndarray]
 
 
-def render_frames(scene: Scene) -> Iterator[sim.Frame]:
-    """The scene's frames in order, rendered one at a time."""
+def _key_poses(scene: Scene, rng: np.random.Generator) -> list[Pose]:
+    camera, board = scene.sim_camera, scene.board
+    f = camera.width / 200 * 0.4   # sim_node's distances: the board fills a similar part of the image
+    n = (scene.frames // (scene.hold + scene.transit) + 2 if scene.motion == "hold"
+         else int(scene.frames / scene.rate / scene.segment) + 3)
+    poses = sim.random_poses(camera, board, n, rng, distance=(f, 2.2 * f), max_tilt_deg=40)
+    if scene.motion == "continuous":   # the board comes in from the side: one field of view away
+        rvec, tvec = poses[0]
+        side = rng.choice([-1.0, 1.0]) * tvec[2] * camera.width / camera.K[0, 0]
+        poses.insert(0, (rvec, tvec + np.array([side, 0.0, 0.0])))
+    return poses
+
+
+def _pose_at(scene: Scene, keys: list[Pose], t: float) -> Pose:
+    """Continuous motion: the pose ``t`` seconds after the board started moving."""
+    k, tau = divmod(t / scene.segment, 1.0)
+    s = tau - SWEEP_VARIATION * np.sin(2 * np.pi * tau) / (2 * np.pi)
+    return sim.between(keys[int(k)], keys[int(k) + 1], s)
+
+
+def exposures(scene: Scene, rng: np.random.Generator) -> Iterator[tuple[Pose | None, Pose | None]]:
+    """Per frame, the board's pose when the exposure starts and, if it moves, when it ends
+    (None, None: no board in the frame)."""
+    keys = _key_poses(scene, rng)
+    period = scene.hold + scene.transit
+    for i in range(scene.frames):
+        if i < scene.lead_in:
+            yield None, None
+            continue
+        j = i - scene.lead_in
+        if scene.motion == "hold":
+            k, phase = divmod(j, period)
+            yield (keys[k] if phase < scene.hold else
+                   sim.between(keys[k], keys[k + 1], (phase - scene.hold + 1) / (scene.transit + 1))), None
+        else:
+            t = j / scene.rate
+            yield _pose_at(scene, keys, t), (_pose_at(scene, keys, t + scene.exposure) if scene.exposure > 0
+                                             else None)
+
+
+def render_frames(scene: Scene) -> Iterator[tuple[sim.Frame, dict]]:
+    """The scene's frames in order, rendered one at a time, each with its truth: ``board`` is
+    "whole", "partial" or "none", ``blur_px`` how far the corners moved during the exposure."""
     camera, board = scene.sim_camera, scene.board
     rng = np.random.default_rng(scene.seed)
     noise = sim.Noise(depth=0.004, offset=scene.depth_offset, amplitude=0.002, invalid_fraction=0.002)
-    f = camera.width / 200 * 0.4   # sim_node's distances: the board fills a similar part of the image
-    period = scene.hold + scene.transit
-    poses = sim.random_poses(camera, board, scene.frames // period + 2, rng, distance=(f, 2.2 * f),
-                             max_tilt_deg=40)
-    for i in range(scene.frames):
-        k, phase = divmod(i, period)
-        pose = poses[k] if phase < scene.hold else _between(poses[k], poses[k + 1],
-                                                            (phase - scene.hold + 1) / (scene.transit + 1))
-        yield sim.render(camera, board, *pose, convention=scene.depth_convention, noise=noise, rng=rng,
-                         gain=0.3, background=3.0, invalid=0.0)
+    outline = sim.board_outline(board, WHOLE_EDGE_SQUARES)
+    absent = (np.zeros(3), np.array([0.0, 0.0, 100.0]))   # far behind the wall: not seen
+    for start, end in exposures(scene, rng):
+        pose = absent if start is None else start
+        frame = sim.render(camera, board, *pose, convention=scene.depth_convention, noise=noise, rng=rng,
+                           gain=0.3, background=3.0, invalid=0.0, moving_to=end)
+        if start is None:
+            truth = {"board": "none", "blur_px": 0.0}
+        else:
+            R = cv2.Rodrigues(frame.rvec)[0]
+            points = board.object_points()
+            whole = sim.in_view(camera, outline @ R.T + frame.tvec, WHOLE_MARGIN_PX)
+            seen = bool(np.any((frame.corners >= 0) & (frame.corners <= [camera.width - 1, camera.height - 1])))
+            blur = 0.0 if end is None else float(np.max(np.linalg.norm(
+                _project(camera, end, points) - _project(camera, start, points), axis=1)))
+            truth = {"board": "whole" if whole else "partial" if seen else "none", "blur_px": round(blur, 4)}
+        yield frame, truth
+
+
+def _project(camera: sim.SimCamera, pose: Pose, points: np.ndarray) -> np.ndarray:
+    R = cv2.Rodrigues(np.asarray(pose[0], dtype=float).reshape(3, 1))[0]
+    return cv2.projectPoints(points, R, np.asarray(pose[1], dtype=float), camera.K, camera.D)[0].reshape(-1, 2)
 
 
 def truth_path(bag: str | Path) -> Path:
@@ -110,7 +183,7 @@ def published_K(scene: Scene) -> np.ndarray | None:
 
 
 def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
-                    frames: Iterable[sim.Frame] | None = None,
+                    frames: Iterable[tuple[sim.Frame, dict]] | None = None,
                     progress: Callable[[int], None] | None = None) -> Path:
     """Write the scene's frames (rendered, or ``frames`` given, e.g. a few cycled for a long
     benchmark bag) to a new bag and its truth beside it; returns the truth file's path."""
@@ -118,8 +191,10 @@ def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
     K = published_K(scene)
     frames = render_frames(scene) if frames is None else frames
     written = 0
+    per_frame = []
     with BagWriter(path, storage) as bag:
-        for i, frame in enumerate(frames):
+        for i, (frame, truth) in enumerate(frames):
+            per_frame.append({"stamp": START + i / scene.rate, **truth})
             stamp = START + i / scene.rate
             depth = np.nan_to_num(frame.depth, nan=0.0)
             depth = (np.clip(np.rint(depth * 1000), 0, 65535).astype(np.uint16) if scene.depth_encoding == "16UC1"
@@ -141,7 +216,7 @@ def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
         "board": {"cols": b.cols, "rows": b.rows, "square_m": b.square},
         "camera_info": {"mode": scene.camera_info, "camera_matrix": None if K is None else K.tolist()},
         "topics": TOPICS if K is not None else {k: v for k, v in TOPICS.items() if k != "camera_info"},
-        "frames": written, "storage": storage,
+        "frames": written, "storage": storage, "per_frame": per_frame,
         "scene": {k: v for k, v in asdict(scene).items() if k not in ("board", "frames")},
     }
     out = truth_path(path)
