@@ -75,6 +75,9 @@ class ImageFields:
         except ImageError as exc:   # the encodings were checked on reading: the data is at fault
             raise FrameError("layout", str(exc)) from None
 
+    def saved_corners(self) -> None:
+        return None   # a recorded image comes with no corners
+
 
 @dataclass(frozen=True)
 class BagFrame:

@@ -1,27 +1,31 @@
-"""Choosing calibration views from a live or replayed ToF stream.
+"""Choosing calibration views from a live or replayed ToF stream, or from a folder of stills.
 
-As in ROS camera_calibration (image_pipeline), each frame with a whole, still board is described
-by a vector of normalised parameters, and it is kept only when that vector is far enough from
-every view kept so far; the progress per parameter tells the user what is still missing. Besides
-camera_calibration's X, Y, size and skew, two ToF axes count: the board's distance, because a
-depth offset and the focal length can only be told apart from boards at several distances, and
-its tilt, measured in the depth rather than guessed from the outline.
+As in ROS camera_calibration (image_pipeline), each frame with a whole board is described by a
+vector of normalised parameters; the progress per parameter tells the user what is still
+missing. Besides camera_calibration's X, Y, size and skew, two ToF axes count: the board's
+distance, because a depth offset and the focal length can only be told apart from boards at
+several distances, and its tilt, measured in the depth rather than guessed from the outline.
 
 Rules (``CollectorConfig`` holds the numbers):
 
-- distance between views: L1 (Manhattan, camera_calibration's) over the six axes, each in 0..1;
-  a view is new when it is at least ``min_distance`` from every kept view;
-- stillness: a frame counts only when the previous frame (at most ``max_gap_s`` earlier) showed
-  the board at most ``motion_px`` RMS away, so a board moving during the exposure (blur, and ToF
-  motion artefacts in the depth) is never kept; this costs one frame of latency where waiting for
-  the next frame would cost a pending candidate. Frames that are stills by nature (a folder of
-  images, each taken of a board held still) skip this check: ``stills=True``;
-- when ``max_views`` are kept, no more are accepted: the set is then far beyond what the
-  calibration needs, and kept views are never swapped, so progress only ever rises.
+- near-duplicates: a view is kept unless it is within ``min_distance`` (L1 over the six axes,
+  each in 0..1) of a kept view: a board held still gives one view, a board that moves gives one
+  per frame, and every still of a folder is used;
+- sharpness, judged physically at any frame rate (``motion``): the board's speed since the
+  previous frame (px/s, when that frame is at most ``max_gap_s`` earlier) times the exposure
+  ``exposure_s`` is the blur it had; the frame itself shows blur as edges wider across the motion
+  than along it or than the sensor's sharp edges, and a multi-phase ToF camera's motion artefacts
+  as depth on the squares' edges far off the board's plane. A frame blurred by more than
+  ``max_blur_px`` by any of these is refused; a still (a folder of images) has no speed, so only
+  the frame's own evidence judges it (``stills=True``);
+- when ``max_views`` are kept, a new view replaces the most redundant kept one (the one nearest
+  to another), if it is farther from the rest than that one, and only where no axis' end is
+  lost: the set stays spread over the recording, and progress only ever rises.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, replace
 
 import cv2
@@ -32,6 +36,7 @@ from .core.detection import Detection
 from .core.errors import CalibrationError
 from .core.pipeline import View, depth_in_metres, depth_units
 from .core.planarize import sample_depth
+from .motion import edge_blur_px, edge_depth_error
 from .tracking import accurate_detect, quick_locate
 
 AXES = ("x", "y", "size", "skew", "depth", "tilt")
@@ -43,6 +48,15 @@ _FROM_ZERO = {"size", "skew", "tilt"}
 EDGE_SQUARES = 0.5
 # The quick corners are pixel-accurate; farther from the accurate ones, one of them is wrong.
 QUICK_AGREEMENT_PX = 1.5
+# The sensor's sharp edges (optics and pixels blur them too) are as wide as the low quantile of
+# the narrower direction's edge widths over the last SHARP_HISTORY boards; the motion blur is
+# what the wider direction has beyond that (widths add in quadrature).
+SHARP_QUANTILE = 0.2
+SHARP_HISTORY = 50
+# Motion artefacts: the depth on the squares' edges this many times farther from the board's
+# plane than the squares' centres are, and at least this far (m), comes from a board that moved.
+ARTEFACT_RATIO = 30.0
+ARTEFACT_MIN_M = 0.1
 
 
 def _real(value: object) -> bool:
@@ -55,15 +69,21 @@ def _real(value: object) -> bool:
 class CollectorConfig:
     """``spans``: per axis of ``AXES``, the range of kept views that counts as full progress
     (camera_calibration's 0.7, 0.7, 0.4, 0.5, then depth and tilt). ``stills``: every frame is a
-    still (no stream to check the board's stillness against), so the motion check is skipped.
+    still (no stream to measure the board's speed in), so only the frame's own evidence of motion counts.
     ``detect_in_region``: the accurate corners are found in the region around the quick ones
     (``accurate_detect``: a tenth of the time at 640x576, and nearer the truth), not in the
-    whole image."""
+    whole image. ``exposure_s``: how long a frame is exposed (all phases of a multi-phase ToF
+    frame), and ``max_blur_px`` how far the board may move in that time (camera_calibration's
+    ``max_chessboard_speed``, in physical units: 5 ms and 1.5 px allow 300 px/s). The default
+    exposure is the short end of ToF cameras' (5 to 30 ms for all phases): on a camera that
+    exposes longer, the speed check underestimates the blur and so never refuses a sharp frame,
+    and the frame's own edges show the blur it misses."""
 
-    min_distance: float = 0.2
+    min_distance: float = 0.02
     max_views: int = 100
     min_views: int = 10
-    motion_px: float = 1.0
+    exposure_s: float = 0.005
+    max_blur_px: float = 1.5
     max_gap_s: float = 1.0
     border_px: float = 2.0
     min_depth_fraction: float = 0.5
@@ -75,7 +95,8 @@ class CollectorConfig:
 
     def __post_init__(self) -> None:
         reals = {name: getattr(self, name) for name in
-                 ("min_distance", "motion_px", "max_gap_s", "border_px", "min_depth_fraction", "max_tilt_deg")}
+                 ("min_distance", "exposure_s", "max_blur_px", "max_gap_s", "border_px", "min_depth_fraction",
+                  "max_tilt_deg")}
         for name, value in reals.items():
             if not _real(value):
                 raise CalibrationError(f"{name} must be a number, got {value!r}")
@@ -93,7 +114,8 @@ class CollectorConfig:
             (self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}"),
             (self.max_views >= 1, f"max_views must be >= 1, got {self.max_views}"),
             (self.min_views >= 1, f"min_views must be >= 1, got {self.min_views}"),
-            (self.motion_px > 0, f"motion_px must be positive, got {self.motion_px}"),
+            (self.exposure_s > 0, f"exposure_s must be positive, got {self.exposure_s}"),
+            (self.max_blur_px > 0, f"max_blur_px must be positive, got {self.max_blur_px}"),
             (self.max_gap_s > 0, f"max_gap_s must be positive, got {self.max_gap_s}"),
             (self.border_px >= 0, f"border_px must be >= 0, got {self.border_px}"),
             (0 < self.min_depth_fraction <= 1,
@@ -134,8 +156,10 @@ class ViewCollector:
         """Forget every view and the stream so far, as at start-up."""
         self._views: list[View] = []
         self._params: list[np.ndarray] = []
+        self._stamps: list[float] = []
         self._size: tuple[int, int] | None = None
         self._previous: tuple[float, np.ndarray] | None = None  # stamp and corners of the last frame
+        self._sharp: deque[float] = deque(maxlen=SHARP_HISTORY)  # narrower edge widths of recent boards
         self._frames = 0
         self._last_reason = "no frame yet"
 
@@ -143,6 +167,11 @@ class ViewCollector:
     def views(self) -> list[View]:
         """The kept views, oldest first, ready for ``calibrate``."""
         return list(self._views)
+
+    @property
+    def stamps(self) -> list[float]:
+        """The time of each kept view, as given to ``add``."""
+        return list(self._stamps)
 
     def add(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float,
             located: Detection | None = None, detected: Detection | None = None) -> Outcome:
@@ -202,18 +231,22 @@ class ViewCollector:
         if valid < cfg.min_depth_fraction * len(z):
             return Outcome(False, f"no valid depth on the board: {valid} of {len(z)} corners have depth "
                                   f"(need {cfg.min_depth_fraction:.0%})", corners=corners)
-        moving = None if cfg.stills else self._motion(previous, stamp, corners)
-        if moving:
-            return Outcome(False, moving, corners=corners)
-
         params = self._parameters(corners, z, w, h)
-        if self._params:
-            nearest = float(np.abs(np.array(self._params) - params).sum(axis=1).min())
+        kept = np.array(self._params).reshape(-1, len(AXES))
+        if len(kept):
+            nearest = float(np.abs(kept - params).sum(axis=1).min())
             if nearest < cfg.min_distance:
-                return Outcome(False, f"too similar to a kept view (distance {nearest:.2f} < "
+                return Outcome(False, f"too similar to a kept view (distance {nearest:.3f} < "
                                       f"{cfg.min_distance:g}): move, turn or tilt the board", params, corners)
+        replaced = None
         if len(self._views) >= cfg.max_views:
-            return Outcome(False, f"view limit reached ({cfg.max_views} views kept)", params, corners)
+            replaced = self._redundant(params)
+            if replaced is None:
+                return Outcome(False, f"view limit reached ({cfg.max_views} views kept, none as redundant as this "
+                                      "one would be)", params, corners)
+        moving = self._motion(previous, stamp, corners, amplitude, depth_m)
+        if moving:
+            return Outcome(False, moving, params, corners)
         # Worth keeping: now the accurate corners, which must agree with the quick ones.
         accurate = accurate_detect(amplitude, self.board, corners, cfg.detect_in_region) if detected is None \
             else detected
@@ -224,11 +257,35 @@ class ViewCollector:
             return Outcome(False, f"the quick and accurate detections disagree by {offset:.1f} px RMS", params,
                            corners)
         corners = accurate.corners
+        if replaced is not None:
+            del self._views[replaced], self._params[replaced], self._stamps[replaced]
         self._views.append(View(depth=depth_in_metres(depth_m).astype(np.float32), corners=corners.copy(),
                                 amplitude=amplitude.copy()))
         self._params.append(params)
+        self._stamps.append(stamp)
         self._size = (w, h)
+        if replaced is not None:
+            return Outcome(True, f"accepted in place of a more redundant view ({cfg.max_views} views kept)", params,
+                           corners)
         return Outcome(True, f"accepted as view {len(self._views)}", params, corners)
+
+    def _redundant(self, params: np.ndarray) -> int | None:
+        """The kept view a new one at ``params`` should replace once the set is full: the one
+        nearest to another kept view, if the new view is farther than that from all the rest and
+        that view holds no axis' lowest or highest value (progress must never fall)."""
+        kept = np.array(self._params)
+        d = np.abs(kept[:, None, :] - kept[None, :, :]).sum(axis=2)
+        np.fill_diagonal(d, np.inf)
+        ends = set(np.argmin(kept, axis=0)) | set(np.argmax(kept, axis=0))
+        order = np.argsort(d.min(axis=1))
+        for i in order:
+            if int(i) in ends:
+                continue
+            others = np.delete(kept, i, axis=0)
+            if np.abs(others - params).sum(axis=1).min() > d[i].min():
+                return int(i)
+            return None
+        return None
 
     def _off_image(self, corners: np.ndarray, w: int, h: int) -> str | None:
         """Why the board is not wholly in the image with room to spare, or None when it is."""
@@ -246,19 +303,27 @@ class ViewCollector:
         return (f"partial board: its outer squares come within {m:g} px of the image border, "
                 "where corners are unreliable")
 
-    def _motion(self, previous: tuple[float, np.ndarray] | None, stamp: float,
-                corners: np.ndarray) -> str | None:
-        """Why the board cannot be trusted to be still, or None when the previous frame shows it is."""
+    def _motion(self, previous: tuple[float, np.ndarray] | None, stamp: float, corners: np.ndarray,
+                amplitude: np.ndarray, depth_m: np.ndarray) -> str | None:
+        """Why the board moved too much while the frame was taken, or None when it is sharp."""
         cfg = self.config
-        if previous is None:
-            return "board just appeared: waiting for the next frame to check that it is still"
-        dt = stamp - previous[0]
-        if not 0 < dt <= cfg.max_gap_s:
-            return (f"previous frame with the board is {dt:+.2f} s away (need 0..{cfg.max_gap_s:g} s): "
-                    "cannot tell whether the board is still")
-        rms = float(np.sqrt(np.mean(np.sum((corners - previous[1]) ** 2, axis=1))))
-        if rms > cfg.motion_px:
-            return f"board moving: {rms:.1f} px RMS since the previous frame (limit {cfg.motion_px:g} px)"
+        if not cfg.stills and previous is not None and 0 < stamp - previous[0] <= cfg.max_gap_s:
+            speed = float(np.max(np.linalg.norm(corners - previous[1], axis=1))) / (stamp - previous[0])
+            if speed * cfg.exposure_s > cfg.max_blur_px:
+                return (f"board moving: {speed:.0f} px/s blurs it by {speed * cfg.exposure_s:.1f} px in a "
+                        f"{cfg.exposure_s * 1e3:g} ms exposure (limit {cfg.max_blur_px:g} px)")
+        across, along = edge_blur_px(amplitude, corners, self.board)
+        if np.isfinite(along):
+            self._sharp.append(along)
+        sharp = float(np.quantile(self._sharp, SHARP_QUANTILE)) if self._sharp else along
+        blur = math.sqrt(max(across ** 2 - sharp ** 2, 0.0)) if np.isfinite(across) else 0.0
+        if blur > cfg.max_blur_px:
+            return (f"motion blur: the board's edges are {across:.1f} px wide across the motion where sharp ones "
+                    f"are {sharp:.1f} px, a blur of {blur:.1f} px (limit {cfg.max_blur_px:g} px)")
+        edges, centres = edge_depth_error(depth_in_metres(depth_m), corners, self.board)
+        if edges > max(ARTEFACT_RATIO * centres, ARTEFACT_MIN_M):
+            return (f"motion artefacts in the depth: the squares' edges lie {edges * 1e3:.0f} mm off the board's "
+                    f"plane, its squares {centres * 1e3:.1f} mm (a board moving while the phases are taken)")
         return None
 
     def _parameters(self, corners: np.ndarray, z: np.ndarray, w: int, h: int) -> np.ndarray:

@@ -90,6 +90,10 @@ PARAMETERS = {
                                     floats=(0.0, 1.0))),
     "views.min": (8, _descriptor("views needed before calibrating", ints=(3, 1000))),
     "views.max": (60, _descriptor("views kept at most (memory stays bounded)", True, (3, 1000))),
+    "motion.exposure": (0.005, _descriptor("how long a frame is exposed (all its phases), s: the board's speed "
+                                          "times this is its blur", True, floats=(1e-5, 1.0))),
+    "motion.max_blur_px": (1.5, _descriptor("a frame whose board moved farther than this while it was "
+                                            "exposed is not a view, px", True, floats=(0.1, 100.0))),
     "camera_name": ("tof_camera", _descriptor("camera_name written into the calibration file")),
     "output_dir": ("~/.ros/tof_calib", _descriptor("where calibration.yaml, calibration.json and views/ go")),
     "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",
@@ -154,8 +158,9 @@ class CalibrationNode(Node):
             self.declare_parameter(name, default, desc)
         p = self._param
         self.board = Board(p("board.cols"), p("board.rows"), p("board.square"))
-        self.collector = ViewCollector(self.board, CollectorConfig(max_views=p("views.max"),
-                                                                   min_views=p("views.min")))
+        self.collector = ViewCollector(self.board, CollectorConfig(max_views=p("views.max"), min_views=p("views.min"),
+                                                                   exposure_s=p("motion.exposure"),
+                                                                   max_blur_px=p("motion.max_blur_px")))
         self.sync = StampSync(p("sync.slop"))
         self._sync_lock = threading.Lock()     # the topics pair frames while ~/reset clears them
         self._warn = _RateLimitedLog(self.get_logger(), WARN_PERIOD_S)
@@ -269,16 +274,17 @@ class CalibrationNode(Node):
                     return
                 amplitude_msg, depth_msg = self._frames.popleft()
                 generation = self._generation
+                idle = not self._frames   # no frame waiting: time to search the whole image for a lost board
                 if self._calibrating.locked():
                     # the running calibration cannot use a new view: leave it the CPU (and the GIL)
                     self.dropped += 1
                     continue
             try:
-                self._collect(amplitude_msg, depth_msg, generation)
+                self._collect(amplitude_msg, depth_msg, generation, idle)
             except Exception as exc:  # noqa: BLE001 - a bad frame must never end the worker
                 self._problem(f"frame skipped: {exc}")
 
-    def _collect(self, amplitude_msg: Image, depth_msg: Image, generation: int) -> None:
+    def _collect(self, amplitude_msg: Image, depth_msg: Image, generation: int, thorough: bool) -> None:
         try:
             amplitude = decode_image(amplitude_msg)
             depth = depth_to_metres(decode_image(depth_msg), depth_msg.encoding, self._param("depth.scale"))
@@ -296,13 +302,15 @@ class CalibrationNode(Node):
             return
         self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
         stamp = depth_msg.header.stamp.sec + depth_msg.header.stamp.nanosec * 1e-9
-        self._judge(amplitude, depth, stamp, generation)
+        self._judge(amplitude, depth, stamp, generation, thorough)
 
-    def _judge(self, amplitude: np.ndarray, depth: np.ndarray, stamp: float, generation: int) -> None:
+    def _judge(self, amplitude: np.ndarray, depth: np.ndarray, stamp: float, generation: int,
+               thorough: bool) -> None:
         """A decoded pair, live or replayed, to the collector."""
         # A board held still is followed from the last frames (about 1 ms) instead of searched for
         # in the whole image (10 to 90 ms): the difference between keeping up with the camera or not.
-        found = self._tracker.locate(amplitude)
+        # A lost board is searched for thoroughly only when no frame waits (``thorough``).
+        found = self._tracker.locate(amplitude, thorough=thorough)
         with self._lock:
             if generation != self._generation:
                 return
@@ -342,7 +350,7 @@ class CalibrationNode(Node):
                         continue
                     self.frame_id = item.depth.frame_id or item.amplitude.frame_id
                     frames += 1
-                    self._judge(amplitude, depth, item.stamp, self._generation)
+                    self._judge(amplitude, depth, item.stamp, self._generation, thorough=True)
         except BagError as exc:
             self._problem(f"cannot replay the bag: {exc}")
             log.error(f"cannot replay the bag: {exc}")

@@ -75,6 +75,10 @@ class ImageSource(Protocol):
     def load(self) -> np.ndarray:
         """The image; raises FrameError."""
 
+    def saved_corners(self) -> np.ndarray | None:
+        """The whole board's corners saved with the image (a calibration's ``views/``), if any;
+        raises FrameError."""
+
 
 class Frame(Protocol):
     """A pair of amplitude and depth images. A worker reads the amplitude to find the board in
@@ -99,24 +103,32 @@ class Located:
 
 def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorConfig) -> list[Located | Skip]:
     """The per-frame work, in a worker: read the amplitude image and find the board, followed
-    through a stream as the node does (``BoardTracker``). A still (a folder of images) has no
-    such history, but nearly every still with a board is a view worth keeping, so its accurate
-    corners are found here too. A Skip's ``where`` is left for the caller to fill."""
+    through a stream as the node does (``BoardTracker``), and searched for thoroughly on every
+    frame where it is lost: offline there is time, and a lost view is lost for good. A still
+    (a folder of images) has no such history, and nearly every still with a board is a view
+    worth keeping, so it is searched for as thoroughly and its accurate corners are found here
+    too. A Skip's ``where`` is left for the caller to fill."""
     out: list[Located | Skip] = []
     tracker = BoardTracker(board)
     for source in sources:
         try:
             amplitude = source.load()
+            if config.stills:
+                saved = source.saved_corners()
         except FrameError as exc:
             out.append(Skip(exc.kind, "", str(exc)))
             tracker.forget()
             continue
         if config.stills:
-            found = quick_locate(amplitude, board)
+            if saved is not None:   # a view the node or tof_calib kept: the corners it was calibrated with
+                known = Detection(saved, "the corners saved with the view")
+                out.append(Located(known, known))
+                continue
+            found = quick_locate(amplitude, board, thorough=True)
             out.append(Located(found, None if found.corners is None else
                                accurate_detect(amplitude, board, found.corners, config.detect_in_region)))
             continue
-        out.append(Located(tracker.locate(amplitude)))
+        out.append(Located(tracker.locate(amplitude, thorough=True)))
     return out
 
 
@@ -236,7 +248,7 @@ class Replay:
         outcome: Outcome = self.collector.add(amplitude, depth, frame.stamp, located=located.found,
                                               detected=located.accurate)
         if outcome.accepted:
-            s.view_stamps.append(frame.stamp)
+            s.view_stamps = self.collector.stamps
         else:
             s.rejections[reason_key(outcome.reason)] += 1
 

@@ -23,6 +23,8 @@ FOLLOW_MAX_MOVE = 0.5
 FOLLOW_GRID_TOLERANCE = 0.25
 FOLLOW_MIN_CONTRAST = 20.0
 NEAR_MARGIN_SQUARES = 2.0
+# A followed corner refined a second time moves less than this (px), or it was not found.
+FOLLOW_CONVERGED_PX = 0.1
 NEAR_MARGIN_PX = 4.0
 
 # While the board is not found, the whole image (50 to 90 ms at 640x576 when it holds no board
@@ -32,7 +34,7 @@ WHOLE_IMAGE_EVERY = 4
 
 
 def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = None,
-                 before: np.ndarray | None = None, whole_image: bool = True) -> Detection:
+                 before: np.ndarray | None = None, whole_image: bool = True, thorough: bool = False) -> Detection:
     """The quick corners ``add`` judges a frame by, with a blank or constant frame as a miss.
 
     ``near``: the corners last seen, when the caller keeps them (offline replay), and ``before``
@@ -41,6 +43,9 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
     motion so far puts it, then from where it was. Failing that, the detector looks in the
     region around both (its cost grows with the area searched), and then, unless
     ``whole_image`` is False, in the whole image: with no ``near``, that is the only search.
+    ``thorough``: where the quick search of the whole image finds nothing, ``detect`` searches
+    it as the calibration's own detector does (a 2x upscaled copy of small images, both OpenCV
+    detectors): at 205x170 the quick search alone misses three boards in four.
     """
     if near is not None:
         square = _square_px(near, board)
@@ -61,7 +66,8 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
         return Detection(None, f"no {board.cols}x{board.rows} board seen lately: the whole image is searched "
                                f"every {WHOLE_IMAGE_EVERY} frames")
     try:
-        return locate(amplitude, board)
+        found = locate(amplitude, board)
+        return detect(amplitude, board) if found.corners is None and thorough else found
     except CalibrationError as exc:
         return Detection(None, str(exc))
 
@@ -69,7 +75,9 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
 class BoardTracker:
     """Where to look for the board in a stream of frames: where it was last seen (its motion
     extrapolated when it was seen in the frame before too, ``quick_locate``); while it is not
-    found, the whole image is searched only every ``WHOLE_IMAGE_EVERY`` frames."""
+    found, the whole image is searched every ``WHOLE_IMAGE_EVERY`` frames, or on every frame,
+    thoroughly, when the caller has the time (``locate(thorough=True)``: offline, or the node with
+    no frame waiting)."""
 
     def __init__(self, board: Board) -> None:
         self.board = board
@@ -80,9 +88,9 @@ class BoardTracker:
         self._seen = self._before = None   # the corners last seen, and the frame's before them when consecutive
         self._misses = 0                   # frames since the board was last seen
 
-    def locate(self, amplitude: np.ndarray) -> Detection:
+    def locate(self, amplitude: np.ndarray, thorough: bool = False) -> Detection:
         found = quick_locate(amplitude, self.board, self._seen, self._before,
-                             whole_image=self._misses % WHOLE_IMAGE_EVERY == 0)
+                             whole_image=thorough or self._misses % WHOLE_IMAGE_EVERY == 0, thorough=thorough)
         if found.corners is None:
             self._before = None
             self._misses += 1
@@ -139,15 +147,20 @@ def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: f
         return None
     origin = np.array([x0, y0], dtype=float)
     pts = (previous - origin).astype(np.float32).reshape(-1, 1, 2)
-    cv2.cornerSubPix(image, pts, (half, half), (-1, -1),
-                     (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01))
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01)
+    cv2.cornerSubPix(image, pts, (half, half), (-1, -1), criteria)
     local = pts.reshape(-1, 2).astype(np.float64)
     if not np.all(np.isfinite(local)) or \
             np.linalg.norm(local + origin - previous, axis=1).max() > FOLLOW_MAX_MOVE * square:
         return None
+    # Started farther than its window reaches, cornerSubPix stops short of the corner: refined
+    # again, it would move on. A board that moved that far is searched for instead.
+    cv2.cornerSubPix(image, pts, (half, half), (-1, -1), criteria)
+    if np.linalg.norm(pts.reshape(-1, 2) - local, axis=1).max() > FOLLOW_CONVERGED_PX:
+        return None
     ids = np.arange(board.n_corners)
     grid = np.column_stack([ids % board.cols, ids // board.cols]).astype(float)   # in squares
-    H, _ = cv2.findHomography(grid, local, 0)
+    H, _ = cv2.findHomography(grid, local, cv2.LMEDS)   # robust: a few corners stuck elsewhere must show
     if H is None or np.linalg.norm(cv2.perspectiveTransform(grid[None], H)[0] - local, axis=1).max() \
             > FOLLOW_GRID_TOLERANCE * square:
         return None
