@@ -290,8 +290,37 @@ class EncodedViews:
     files: tuple[tuple[str, bytes], ...]
 
 
+CORNERS_SUFFIX = "_corners.csv"
+_CORNERS_HEADER = "id,x,y"
+
+
+def _corners_csv(view: View) -> bytes:
+    """The corners a view was calibrated with: board index and pixel (OpenCV's convention: pixel
+    centres at integers), one corner a line, so a recalibration uses them instead of detecting."""
+    corners = np.asarray(view.corners, dtype=float).reshape(-1, 2)
+    ids = np.arange(len(corners)) if view.ids is None else np.asarray(view.ids, dtype=int).ravel()
+    lines = [_CORNERS_HEADER] + [f"{i},{x:.6f},{y:.6f}" for i, (x, y) in zip(ids, corners)]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def read_corners(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """(ids, corners) from a ``NNNN_corners.csv``; CalibrationError naming the file when it is not one."""
+    path = Path(path)
+    try:
+        lines = path.read_text().split()
+        if not lines or lines[0] != _CORNERS_HEADER:
+            raise ValueError(f"the first line must be {_CORNERS_HEADER!r}")
+        rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]], dtype=float).reshape(-1, 3)
+    except (OSError, ValueError) as exc:
+        raise CalibrationFileError(f"{path.name}: not a corners file ({exc})") from None
+    if not np.all(np.isfinite(rows)) or np.any(rows[:, 0] != np.round(rows[:, 0])) or rows[:, 0].min(initial=0) < 0:
+        raise CalibrationFileError(f"{path.name}: corner ids must be whole numbers >= 0 and pixels finite")
+    return rows[:, 0].astype(int), rows[:, 1:]
+
+
 def encode_views(views: Sequence[View], depth_units: float | None = None) -> EncodedViews:
-    """NNNN_ir.png and NNNN_depth.png of each view, as in the Kinect v2 data set.
+    """NNNN_ir.png and NNNN_depth.png of each view, as in the Kinect v2 data set, and the
+    NNNN_corners.csv it was calibrated with when it has corners.
 
     Depth follows ``calibrate``'s convention (float metres, integer millimetres unless
     ``depth_units`` says otherwise) and is stored as uint16 millimetres, 0 = invalid. Every
@@ -304,6 +333,8 @@ def encode_views(views: Sequence[View], depth_units: float | None = None) -> Enc
             raise CalibrationFileError(f"{where} has no amplitude image; saved views are recalibrated from it")
         files.append((f"{i:04d}_ir.png", _png(_amplitude_png(view.amplitude, where), where)))
         files.append((f"{i:04d}_depth.png", _png(_depth_png(view.depth, depth_units, where), where)))
+        if view.corners is not None:
+            files.append((f"{i:04d}{CORNERS_SUFFIX}", _corners_csv(view)))
     return EncodedViews(tuple(files))
 
 
@@ -315,7 +346,8 @@ def save_views(directory: str | os.PathLike, views: Sequence[View] | EncodedView
 
 
 def load_views(directory: str | os.PathLike) -> list[View]:
-    """The views ``save_views`` wrote (or the Kinect v2 set), in file-name order; depth in mm."""
+    """The views ``save_views`` wrote (or the Kinect v2 set), in file-name order; depth in mm,
+    with the corners they were calibrated with where those were saved."""
     directory = Path(directory)
     views = []
     for ir_path in sorted(directory.glob("*_ir.png")):
@@ -325,7 +357,9 @@ def load_views(directory: str | os.PathLike) -> list[View]:
         if amplitude is None or depth is None:
             missing = ir_path if amplitude is None else depth_path
             raise CalibrationFileError(f"{missing}: missing or not a readable image")
-        views.append(View(depth=depth, amplitude=amplitude))
+        corners_path = ir_path.with_name(ir_path.name[:-len("_ir.png")] + CORNERS_SUFFIX)
+        ids, corners = read_corners(corners_path) if corners_path.exists() else (None, None)
+        views.append(View(depth=depth, corners=corners, ids=ids, amplitude=amplitude))
     if not views:
         raise CalibrationFileError(f"{directory}: no NNNN_ir.png views found")
     return views

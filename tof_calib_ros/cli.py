@@ -30,7 +30,7 @@ from .check import check_views, load_calibration
 from .collector import AXES, CollectorConfig, ViewCollector
 from .image_folder import scan
 from .replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
-from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, Scene, write_recording
+from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 
 REJECTED_DIR = "rejected"  # a refused calibration's report and figures, inside --output
 EXIT_OK = 0
@@ -48,6 +48,7 @@ EXIT_CODES = {EXIT_OK: "success", EXIT_ERROR: "other error (the message says whi
               EXIT_QUALITY: "calibration fails the quality check (check: the calibration does not fit the data)"}
 # the node's defaults (node.PARAMETERS), so offline and live collection agree
 VIEWS_MIN, VIEWS_MAX, SLOP_S, DEPTH_SCALE, CAMERA_NAME = 8, 60, 0.02, 0.001, "tof_camera"
+EXPOSURE_S, MAX_BLUR_PX = CollectorConfig.exposure_s, CollectorConfig.max_blur_px
 # camera_info_manager accepts no other camera name (as calibration_file checks on writing)
 _CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 PLAIN_PERIOD_S = 2.0
@@ -139,14 +140,16 @@ def _board(args: argparse.Namespace) -> Board:
     return Board(args.size[0], args.size[1], args.square)
 
 
-def collector_config(views_min: int = VIEWS_MIN, views_max: int = VIEWS_MAX, stills: bool = False) -> CollectorConfig:
+def collector_config(views_min: int = VIEWS_MIN, views_max: int = VIEWS_MAX, stills: bool = False,
+                     exposure_s: float = EXPOSURE_S, max_blur_px: float = MAX_BLUR_PX) -> CollectorConfig:
     """The node's collector rules."""
-    return CollectorConfig(max_views=views_max, min_views=views_min, stills=stills)
+    return CollectorConfig(max_views=views_max, min_views=views_min, stills=stills, exposure_s=exposure_s,
+                           max_blur_px=max_blur_px)
 
 
 def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Skip], total: int | None,
              stills: bool, image_size: tuple[int, int] | None = None) -> tuple[Summary, ViewCollector]:
-    config = collector_config(args.views_min, args.views_max, stills)
+    config = collector_config(args.views_min, args.views_max, stills, args.exposure, args.max_blur)
     progress = Progress(total)
 
     def show(summary: Summary, collector: ViewCollector) -> None:
@@ -163,6 +166,8 @@ def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Sk
 def _print_summary(summary: Summary, collector: ViewCollector, unpaired: dict[str, int] | None = None) -> None:
     print(f"frames: {summary.frames} judged, {summary.boards} with a board, {len(collector.views)} views kept")
     print(f"coverage: {_coverage(collector)}")
+    if summary.rejections:
+        print("not kept: " + ", ".join(f"{n} {reason}" for reason, n in summary.rejections.most_common()))
     if unpaired and any(unpaired.values()):
         print("unpaired: " + ", ".join(f"{n} {role}" for role, n in unpaired.items() if n)
               + " frames had no partner within the pairing slop (--slop)")
@@ -276,13 +281,15 @@ def _folder_frames(args: argparse.Namespace, board: Board, folder: Path):
     if not folder.is_dir():
         raise Failure(EXIT_UNREADABLE, f"{folder}: not a folder")
     try:
-        frames, skips = scan(folder, args.depth_scale)
+        frames, skips = scan(folder, args.depth_scale, board.n_corners)
     except OSError as exc:
         raise Failure(EXIT_UNREADABLE, f"{folder}: cannot list it ({exc.strerror or exc})") from None
     if not frames:
         raise Failure(EXIT_UNREADABLE, f"{folder}: no amplitude/depth pairs (NNNN_ir.png with NNNN_depth.png; "
                                        "PNG, TIFF or NPY)")
-    print(f"folder: {folder} ({len(frames)} amplitude/depth pairs, each a still)")
+    saved = sum(f.corners_path is not None for f in frames)
+    print(f"folder: {folder} ({len(frames)} amplitude/depth pairs, each a still: every one with a board is used, "
+          "near-duplicates aside" + (f"; {saved} with the corners saved beside them" if saved else "") + ")")
     summary, collector = _collect(args, board, [*skips, *frames], len(frames) + len(skips), stills=True)
     _print_summary(summary, collector)
     return summary, collector, {"kind": "folder", "path": str(folder)}
@@ -307,7 +314,8 @@ def cmd_images(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     scene = Scene(camera=args.camera, board=_board(args), frames=args.frames, rate=args.rate, hold=args.hold,
-                  transit=args.transit, depth_convention=args.depth_convention,
+                  transit=args.transit, motion=args.motion, segment=args.segment, exposure=args.exposure,
+                  lead_in=args.lead_in, depth_convention=args.depth_convention,
                   depth_encoding=args.depth_encoding, depth_offset=args.depth_offset,
                   camera_info=args.camera_info, seed=args.seed)
     out = Path(args.output)
@@ -375,6 +383,12 @@ def _add_collection(p: argparse.ArgumentParser, convention_default: str | None =
                    help=f"views needed to calibrate (default {VIEWS_MIN}, as the node)")
     p.add_argument("--views-max", type=int, default=VIEWS_MAX, metavar="N",
                    help=f"views kept at most (default {VIEWS_MAX}, as the node)")
+    p.add_argument("--exposure", type=_positive(float), default=EXPOSURE_S, metavar="S",
+                   help=f"how long a frame is exposed, all its phases (default {EXPOSURE_S} s): the board's speed "
+                        "between frames times this is its blur")
+    p.add_argument("--max-blur", type=_positive(float), default=MAX_BLUR_PX, metavar="PX",
+                   help=f"a frame whose board moved farther than this while exposed is not a view "
+                        f"(default {MAX_BLUR_PX} px, as the node)")
     p.add_argument("--workers", type=int, default=default_workers(), metavar="N",
                    help=f"processes looking for the board (default {default_workers()})")
 
@@ -432,8 +446,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", choices=tuple(CAMERAS), default="pmd", help="pmd: 200x200; azure: 640x576")
     p.add_argument("--frames", type=int, default=Scene.frames)
     p.add_argument("--rate", type=_positive(float), default=Scene.rate, help="frames per second")
-    p.add_argument("--hold", type=int, default=Scene.hold, help="frames the board is held still at each pose")
-    p.add_argument("--transit", type=int, default=Scene.transit, help="frames it moves between poses")
+    p.add_argument("--motion", choices=MOTIONS, default=Scene.motion,
+                   help="hold: held still at each pose, then carried to the next (default); continuous: never "
+                        "still, entering from the side, blurred where it moves fast")
+    p.add_argument("--hold", type=int, default=Scene.hold, help="hold: frames the board is held still at each pose")
+    p.add_argument("--transit", type=int, default=Scene.transit, help="hold: frames it moves between poses")
+    p.add_argument("--segment", type=_positive(float), default=Scene.segment, metavar="S",
+                   help=f"continuous: seconds from one pose to the next (default {Scene.segment})")
+    p.add_argument("--exposure", type=float, default=Scene.exposure, metavar="S",
+                   help=f"continuous: how long each frame is exposed while the board moves (default {Scene.exposure})")
+    p.add_argument("--lead-in", type=int, default=Scene.lead_in, metavar="N",
+                   help="frames without a board before it appears (default 0)")
     p.add_argument("--depth-convention", choices=("z", "radial"), default="z")
     p.add_argument("--depth-encoding", choices=DEPTH_ENCODINGS, default="16UC1")
     p.add_argument("--depth-offset", type=float, default=0.02, metavar="M", help="systematic depth offset")

@@ -1,5 +1,6 @@
 """Amplitude and depth image pairs in a folder: the Kinect v2 data set's layout, which is also
-what ``calibration_file.save_views`` writes.
+what ``calibration_file.save_views`` writes (with each view's corners in ``<name>_corners.csv``,
+which are then used as they are instead of being detected again).
 
 A pair is ``<name>_ir.<ext>`` (or ``_amplitude``) with ``<name>_depth.<ext>``, in 16- or 8-bit
 PNG, TIFF or NPY (extensions may differ within a pair). Integer depth counts ``depth_scale``
@@ -15,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
 from .core.pipeline import depth_in_metres
 from .replay import FrameError, Skip
 
@@ -44,10 +46,25 @@ class ImageFile:
     """An image file, read where it is needed (a worker reads the amplitude to find the board)."""
 
     path: Path
+    corners_path: Path | None = None
+    n_corners: int = 0
     nbytes: int = 0   # not read yet
 
     def load(self) -> np.ndarray:
         return _read(self.path)
+
+    def saved_corners(self) -> np.ndarray | None:
+        if self.corners_path is None:
+            return None
+        try:
+            ids, corners = read_corners(self.corners_path)
+        except CalibrationFileError as exc:
+            raise FrameError("unreadable", str(exc)) from None
+        if len(ids) != self.n_corners or np.any(ids != np.arange(self.n_corners)):
+            raise FrameError("unreadable", f"{self.corners_path.name}: holds corners {ids.min(initial=0)} to "
+                                           f"{ids.max(initial=-1)} of {len(ids)}, not the whole board's "
+                                           f"{self.n_corners} in order")
+        return corners
 
 
 @dataclass(frozen=True)
@@ -59,9 +76,11 @@ class FileFrame:
     amplitude_path: Path
     depth_path: Path
     depth_scale: float
+    corners_path: Path | None = None
+    n_corners: int = 0
 
     def amplitude_source(self) -> ImageFile:
-        return ImageFile(self.amplitude_path)
+        return ImageFile(self.amplitude_path, self.corners_path, self.n_corners)
 
     def decode(self) -> tuple[np.ndarray, np.ndarray]:
         amplitude, depth = _read(self.amplitude_path), _read(self.depth_path)
@@ -72,10 +91,12 @@ class FileFrame:
         return amplitude, depth_in_metres(depth, scale)
 
 
-def scan(directory: str | Path, depth_scale: float = 0.001) -> tuple[list[FileFrame], list[Skip]]:
+def scan(directory: str | Path, depth_scale: float = 0.001,
+         n_corners: int = 0) -> tuple[list[FileFrame], list[Skip]]:
     """The folder's pairs in name order, and a Skip for each image without its partner.
 
-    Frames get stamps one second apart: they only order the stills.
+    Frames get stamps one second apart: they only order the stills. A pair's saved corners
+    (``<name>_corners.csv``) are used when ``n_corners`` (the board's) is given.
     """
     directory = Path(directory)
     found: dict[str, dict[str, Path]] = {}
@@ -95,5 +116,7 @@ def scan(directory: str | Path, depth_scale: float = 0.001) -> tuple[list[FileFr
             skips.append(Skip("unreadable", path.name, f"no {'depth' if role == 'amplitude' else 'amplitude'} "
                                                        f"image beside {path.name}"))
             continue
-        frames.append(FileFrame(float(len(frames)), stem, pair["amplitude"], pair["depth"], depth_scale))
+        corners = directory / f"{stem}{CORNERS_SUFFIX}"
+        frames.append(FileFrame(float(len(frames)), stem, pair["amplitude"], pair["depth"], depth_scale,
+                                corners if n_corners and corners.exists() else None, n_corners))
     return frames, skips
