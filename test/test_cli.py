@@ -28,6 +28,8 @@ from tof_calib_ros.cli import (
     EXIT_TOO_FEW_VIEWS,
     EXIT_UNREADABLE,
     EXIT_USAGE,
+    MAX_BLUR_PX,
+    VIEWS_MAX,
     Progress,
     main,
 )
@@ -106,7 +108,8 @@ def test_one_worker_and_two_keep_the_same_views(bags, calibrated, tmp_path, caps
     one = json.loads((tmp_path / "calibration.json").read_text())
     two = json.loads((calibrated / "calibration.json").read_text())
     assert one["collection"] == two["collection"]   # the same frames kept
-    np.testing.assert_allclose(one["camera_matrix"], two["camera_matrix"], rtol=1e-9)
+    # the same calibration, to the last digits the threaded sums of the solver leave alone
+    np.testing.assert_allclose(one["camera_matrix"], two["camera_matrix"], rtol=1e-7)
 
 
 def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
@@ -119,6 +122,85 @@ def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
     assert 0.015 < doc["depth_bias"]["depth_offset"] < 0.035   # the data set's calibration: 25.5 mm
     assert "51 amplitude/depth pairs" in out and doc["collection"]["frames_with_board"] >= 45
     assert (tmp_path / "calibration.yaml").is_file() and (tmp_path / "report.html").is_file()
+
+
+# -- recordings unlike the held-still ones: a board that never stops, sparse frames, low resolution --
+def _sharp_frames(bag: Path) -> int:
+    """Frames whose whole board moved at most the default blur limit while exposed (the truth)."""
+    return sum(f["board"] == "whole" and f["blur_px"] <= MAX_BLUR_PX for f in _truth(bag)["per_frame"])
+
+
+@pytest.mark.parametrize("rate, frames, seed", [(10, 160, 3), (5, 80, 4), (1, 24, 5)])
+def test_a_board_that_never_stops_calibrates_at_any_frame_rate(tmp_path, capsys, rate, frames, seed):
+    """A board waved without a pause, entering from the side after a second of empty frames,
+    blurred where it moves fast: at 10 and 5 frames/s, and sparse (1 frame/s, where no speed can
+    be measured between frames and each frame's own edges judge it)."""
+    bag = tmp_path / "moving"
+    assert main(["simulate", "--output", str(bag), "--motion", "continuous", "--rate", str(rate), "--frames",
+                 str(frames), "--lead-in", str(rate), "--segment", "1.5", "--seed", str(seed)]) == EXIT_OK
+    capsys.readouterr()
+    code, out, err = run(capsys, "bag", bag, *BOARD, "--output", tmp_path / "out")
+    assert code == EXIT_OK, err + out
+    doc = json.loads((tmp_path / "out" / "calibration.json").read_text())
+    K, K_true = np.array(doc["camera_matrix"]), np.array(_truth(bag)["camera_matrix"])
+    for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)):
+        assert K[i, j] == pytest.approx(K_true[i, j], rel=0.005), (i, j, K)
+    assert len(doc["views"]) >= 0.8 * min(_sharp_frames(bag), VIEWS_MAX), out
+
+
+@pytest.fixture(scope="module")
+def kinect_low_res(kinect_dir, tmp_path_factory) -> Path:
+    """The Kinect v2 folder at 0.4 scale (205x170): what a PMD or pico flexx class sensor gives."""
+    folder = tmp_path_factory.mktemp("kinect_205x170")
+    for ir_path in sorted(kinect_dir.glob("*_ir.png")):
+        ir = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
+        depth = cv2.imread(str(ir_path.with_name(ir_path.name.replace("_ir", "_depth"))), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(folder / ir_path.name), cv2.resize(ir, (205, 170), interpolation=cv2.INTER_AREA))
+        cv2.imwrite(str(folder / ir_path.name.replace("_ir", "_depth")),
+                    cv2.resize(depth, (205, 170), interpolation=cv2.INTER_NEAREST))
+    return folder
+
+
+def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_res, tmp_path, capsys):
+    from tof_calib_ros.core.detection import detect
+
+    found = sum(detect(cv2.imread(str(p), cv2.IMREAD_UNCHANGED), Board(5, 7, 0.03)).corners is not None
+                for p in sorted(kinect_low_res.glob("*_ir.png")))
+    code, out, err = run(capsys, "images", kinect_low_res, *BOARD, "--output", tmp_path)
+    assert code == EXIT_OK, err + out
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    # the CLI finds what the calibration's detector finds (47 of 51), and uses nearly all of it
+    assert doc["collection"]["frames_with_board"] >= max(found, 45), out
+    assert len(doc["views"]) >= 0.9 * doc["collection"]["frames_with_board"], out
+    # against the full-resolution calibration of the same views, scaled (pixel centres stay at integers)
+    code, _, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "full")
+    assert code == EXIT_OK, err
+    full = np.array(json.loads((tmp_path / "full" / "calibration.json").read_text())["camera_matrix"])
+    K, s = np.array(doc["camera_matrix"]), 205 / 512
+    assert K[0, 0] == pytest.approx(full[0, 0] * s, rel=0.02) and K[1, 1] == pytest.approx(full[1, 1] * s, rel=0.02)
+    assert abs(K[0, 2] - ((full[0, 2] + 0.5) * s - 0.5)) < 2.5 and abs(K[1, 2] - ((full[1, 2] + 0.5) * s - 0.5)) < 2.5
+
+
+def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path, capsys):
+    """A folder of stills is not thinned as a stream is: every view with a whole board is used;
+    the views/ written beside the calibration hold their corners, and calibrate again to the same K."""
+    from tof_calib_ros import calibrate
+    from tof_calib_ros.calibration_file import load_views
+
+    code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "a")
+    assert code == EXIT_OK, err
+    doc = json.loads((tmp_path / "a" / "calibration.json").read_text())
+    rejected = doc["collection"]["frames_with_board"] - len(doc["views"])
+    assert rejected <= 1 and "too similar" not in out, out   # 0002's outer squares touch the border
+    views = load_views(tmp_path / "a" / "views")
+    assert len(views) == len(doc["views"]) and all(v.corners is not None for v in views)
+    api = calibrate(views, Board(5, 7, 0.03), (512, 424))
+    np.testing.assert_allclose(api.K, doc["camera_matrix"], rtol=1e-9)
+    code, out, err = run(capsys, "images", tmp_path / "a" / "views", *BOARD, "--output", tmp_path / "b")
+    assert code == EXIT_OK, err
+    assert f"{len(views)} with the corners saved beside them" in out
+    np.testing.assert_allclose(json.loads((tmp_path / "b" / "calibration.json").read_text())["camera_matrix"],
+                               doc["camera_matrix"], rtol=1e-9)
 
 
 def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):
@@ -151,7 +233,7 @@ def test_broken_messages_are_skipped_counted_and_named(tmp_path, capsys):
     camera = scene.sim_camera
     path = tmp_path / "broken"
     with BagWriter(path) as bag:
-        for i, frame in enumerate(render_frames(scene)):
+        for i, (frame, _truth) in enumerate(render_frames(scene)):
             t = 1000.0 + i / scene.rate
             amplitude = bag.image_message(frame.amplitude, "mono16", t, FRAME_ID)
             depth = bag.image_message(np.nan_to_num(np.rint(frame.depth * 1000)).astype(np.uint16), "16UC1", t,
@@ -251,12 +333,15 @@ def test_no_board_exits_5(bags, capsys, tmp_path):
                              "corners, as camera_calibration does)"
 
 
-def test_too_few_views_exit_6(bags, capsys, tmp_path):
-    code, out, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--views-min", "40")
+def test_too_few_views_exit_6(capsys, tmp_path):
+    # a board held at three poses for 8 frames each: three views and their near-duplicates
+    bag = tmp_path / "three_poses"
+    assert main(["simulate", "--output", str(bag), "--frames", "24", "--hold", "8", "--transit", "0"]) == EXIT_OK
+    code, out, err = run(capsys, "bag", bag, *BOARD, "--output", tmp_path / "out", "--views-min", "20")
     assert code == EXIT_TOO_FEW_VIEWS
-    assert re.fullmatch(r"tof_calib: only 2\d views collected, need 40 \(--views-min\); frames were rejected as: "
-                        r".*board moving \(\d+\).*", last_line(err))
-    assert not (tmp_path / "calibration.yaml").exists()
+    assert re.fullmatch(r"tof_calib: only [3-6] views collected, need 20 \(--views-min\); frames were rejected as: "
+                        r"too similar to a kept view \(1\d\).*", last_line(err)), last_line(err)
+    assert not (tmp_path / "out" / "calibration.yaml").exists()
 
 
 def test_a_failed_quality_check_exits_7_and_leaves_the_earlier_calibration(bags, calibrated, capsys, tmp_path):

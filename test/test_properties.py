@@ -336,7 +336,7 @@ def test_board_is_valid_or_refused(cols, rows, square):
 
 settings_values = st.one_of(st.floats(), st.integers(-3, 200), st.integers(2 ** 63, 2 ** 70),
                             st.sampled_from([None, "1", True, (0.3, 3.0), np.float64(0.5)]))
-config_fields = st.sampled_from(["min_distance", "max_views", "min_views", "motion_px", "max_gap_s",
+config_fields = st.sampled_from(["min_distance", "max_views", "min_views", "exposure_s", "max_blur_px", "max_gap_s",
                                  "border_px", "min_depth_fraction", "max_tilt_deg"])
 pairs = st.one_of(st.tuples(st.floats(), st.floats()), st.sampled_from([None, 1.0, (1.0,), "ab", (0.3, 3.0, 5.0)]))
 spans = st.one_of(st.lists(st.floats(), min_size=5, max_size=7).map(tuple), st.sampled_from([None, 1.0, "abcdef"]))
@@ -356,7 +356,7 @@ def test_collector_config_is_valid_or_refused(values, depth_range, spans_):
         return
     counts_ = [config.max_views, config.min_views]
     assert all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in counts_)
-    numbers = [config.min_distance, config.motion_px, config.max_gap_s, config.border_px,
+    numbers = [config.min_distance, config.exposure_s, config.max_blur_px, config.max_gap_s, config.border_px,
                config.min_depth_fraction, config.max_tilt_deg, *config.depth_range, *config.spans]
     # inf may mean "no limit"; NaN and anything not a number mean nothing
     assert all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and not math.isnan(v)

@@ -38,13 +38,12 @@ def _edges(corners: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _edge_widths(image: np.ndarray, segments: np.ndarray, across: float) -> np.ndarray:
-    """Width (px) of the edge each corner-to-corner segment lies on (a segment joins corners
-    along a square's side, which is the edge between two squares), from the spread of the
+    """Width (px) of the edge each corner-to-corner segment lies on, at each of ``ALONG`` (n, 3; a
+    segment joins corners along a square's side, which is the edge between two squares), from the spread of the
     slope across it: sqrt(12) standard deviations of the profile's derivative, which is b for a
-    ramp b px wide. Pixels sample the edge: a sharp edge reads 1 px where it falls between two
-    pixel centres and 2 px where it falls on one; sqrt(3) on average over where edges fall, and
-    sqrt(b^2 + 3) for an edge blurred by b px across it. ``across``: the squares' size across
-    the edge (px), which the profile must stay within."""
+    ramp b px wide, less what the pixels add (which depends on where the edge falls on them):
+    1 px for a sharp edge, sqrt(1 + b^2) for an edge blurred by b px across it. ``across``: the
+    squares' size across the edge (px), which the profile must stay within."""
     a, b = segments[:, 0], segments[:, 1]
     d = b - a
     u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
@@ -55,9 +54,10 @@ def _edge_widths(image: np.ndarray, segments: np.ndarray, across: float) -> np.n
               + steps[None, None, :, None] * n[:, None, None, :])
     xy = points.reshape(1, -1, 2).astype(np.float32)
     profile = cv2.remap(image, xy[..., 0], xy[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    slope = np.diff(profile.reshape(len(segments), len(ALONG), len(steps)), axis=2)
-    # each profile's slope taken as positive (the step may go either way), then averaged along the edge
-    slope = (slope * np.sign(slope.sum(axis=2, keepdims=True))).mean(axis=1)
+    # Each profile on its own: the quick corners are a fraction of a pixel off, so profiles at
+    # different places along an edge cross it at different offsets, and averaged they would widen it.
+    slope = np.diff(profile.reshape(len(segments) * len(ALONG), len(steps)), axis=1)
+    slope = slope * np.sign(slope.sum(axis=1, keepdims=True))   # the step may go either way
     # Only the edge itself: the run of slopes above a fraction of the steepest around it. Noise and
     # the shading of a tilted board, far from the edge, would otherwise dominate the spread.
     peak = np.argmax(slope, axis=1)
@@ -71,16 +71,25 @@ def _edge_widths(image: np.ndarray, segments: np.ndarray, across: float) -> np.n
     with np.errstate(divide="ignore", invalid="ignore"):
         mean = (slope * at).sum(axis=1) / mass
         var = (slope * (at[None] - mean[:, None]) ** 2).sum(axis=1) / mass
-        return np.where(mass > 0, np.sqrt(12 * var), np.nan)
+    # Where the edge falls on the pixels: a sharp edge inside a pixel, a fraction phi from its
+    # side, spreads over that pixel and the next (variance phi (1 - phi) along each axis beyond
+    # the pixel's own 1/12). Taken off, a sharp edge reads 1 px wherever it falls.
+    normal = np.repeat(n, len(ALONG), axis=0)
+    crossing = points[:, :, 0].reshape(-1, 2) + (mean[:, None] + reach) * normal
+    phase = np.mod(crossing + 0.5, 1.0)
+    sampling = np.sum(normal ** 2 * phase * (1 - phase), axis=1)
+    with np.errstate(invalid="ignore"):
+        width = np.sqrt(np.maximum(12 * (var - sampling), 1.0))
+    return np.where(mass > 0, width, np.nan).reshape(len(segments), len(ALONG))
 
 
 def edge_blur_px(amplitude: np.ndarray, corners: np.ndarray, board: Board) -> tuple[float, float]:
-    """Edge width (px, the root mean square of ``_edge_widths``) across each of the board's two
-    edge directions, the wider first."""
+    """Edge width (px, the median of ``_edge_widths``: glare or a dirty square widens a few edges,
+    motion all of them) across each of the board's two edge directions, the wider first."""
     image = tone_map(amplitude).astype(np.float32)
     families = _edges(corners, board)
     size = [float(np.median(np.linalg.norm(f[:, 1] - f[:, 0], axis=1))) for f in families]
-    widths = [float(np.sqrt(np.nanmean(_edge_widths(image, f, size[1 - k]) ** 2))) for k, f in enumerate(families)]
+    widths = [float(np.nanmedian(_edge_widths(image, f, size[1 - k]))) for k, f in enumerate(families)]
     return max(widths), min(widths)
 
 

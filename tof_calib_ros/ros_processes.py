@@ -211,3 +211,44 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str | Callabl
             why = f"{ended[0]} ended" if ended else f"timed out after {timeout:g} s"
             raise RosProcessError(f"{why} while waiting for {what() if callable(what) else what}\n" + logs(*procs))
         time.sleep(period)
+
+
+def play(node: Any, namespace: str, bag: Path, rate: float, procs: tuple[NodeProcess, ...] = (),
+         timeout: float = 30.0) -> int:
+    """Publish a recording's amplitude and depth pairs to ``namespace``/amplitude and /depth at
+    ``rate`` pairs a second (a camera, live), with their recorded stamps, once the subscriber is
+    there; returns the pairs sent. ``node``: the rclpy node to publish from (a ``Spinner``'s)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from .bag_io import BagSource
+    from .replay import Skip
+
+    pubs = [node.create_publisher(Image, f"{namespace}/{topic}", qos_profile_sensor_data)
+            for topic in ("amplitude", "depth")]
+    sent = 0
+    try:
+        wait_until(lambda: all(p.get_subscription_count() for p in pubs), timeout, "the node's image subscriptions",
+                   *procs)
+        with BagSource(bag) as source:
+            due = time.monotonic()
+            for frame in source.frames():
+                if isinstance(frame, Skip):
+                    continue
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                stamp = Time(sec=int(frame.stamp), nanosec=int(round(frame.stamp % 1 * 1e9)) % 1_000_000_000)
+                for pub, fields in zip(pubs, (frame.amplitude, frame.depth)):
+                    msg = Image(height=fields.height, width=fields.width, encoding=fields.encoding,
+                                is_bigendian=fields.is_bigendian, step=fields.step)
+                    msg.header.stamp, msg.header.frame_id = stamp, fields.frame_id
+                    msg.data = fields.data.tobytes()
+                    pub.publish(msg)
+                sent += 1
+                due += 1.0 / rate
+    finally:
+        for p in pubs:
+            node.destroy_publisher(p)
+    return sent
