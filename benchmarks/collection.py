@@ -1,6 +1,6 @@
 """Views collected from recordings unlike the ones the product was tuned on, offline and live.
 
-    python benchmarks/collection.py [--seeds 1 2] [--seconds 12] [--no-live] [--json PATH]
+    python benchmarks/collection.py [--seeds 1 2] [--seconds 16] [--cameras pmd azure] [--no-live] [--json PATH]
 
 Recordings made with the simulator (``tof_calib simulate``'s scenes): a board that never stops
 (``motion=continuous``: it enters from the side after half a second without a board, then sweeps
@@ -13,13 +13,15 @@ and another speed (a pose every 1.2 or 1.8 s).
 - Offline: ``tof_calib bag``'s path (``Replay`` with the CLI's collector rules, 2 workers), then
   ``calibrate`` with the defaults. Live (unless ``--no-live``): a calibration_node process, as
   ``ros2 run`` starts it, fed the recording's frames on its topics at the recording's rate,
-  then ``~/calibrate``.
+  then ``~/calibrate`` (Fast DDS tuned for large frames, as ``node_throughput.py`` and the
+  README's "Large images" do: with its defaults, 640x576 frames are lost in transport).
 - Truth per frame: whether the whole board is in view (the collector's margin) and how far its
   corners moved during the exposure; "sharp" is at most the default ``max_blur_px`` (1.5 px).
 - Figures: sharp frames; of them, the share the collector took when it judged them (offline);
   views in the calibration against min(sharp frames, ``views.max`` = 60); blurred frames taken;
-  the largest error of fx, fy, cx, cy against the truth, in percent. Targets: views >= 80 % and
-  errors <= 0.5 %, medians over the seeds.
+  the largest error of fx, fy, cx, cy against the truth, in percent, ours and OpenCV's
+  (``calibrate(method="traditional")``) on the same views. Targets: views >= 80 % and errors
+  <= 0.5 %, medians over the seeds.
 
 Two shared cores: the live runs publish in real time from this process while the node works.
 """
@@ -91,12 +93,14 @@ def offline(bag: Path, per_frame: list[dict]) -> dict:
     out = {"frames": summary.frames, "sharp": sum(sharp), "sharp_taken": sum(s and t for s, t in zip(sharp, taken)),
            "blurred": sum(blurred), "blurred_taken": sum(b and t for b, t in zip(blurred, taken)),
            "views": len(views), "rejections": dict(summary.rejections.most_common(5))}
-    try:
-        result = calibrate(views, BOARD, summary.image_size)
-        out["K"] = result.K.tolist()
-        out["trusted"] = bool(result.ok)
-    except Exception as exc:  # noqa: BLE001 - a failed calibration is a figure of the table
-        out["error"] = str(exc)
+    for key, method in (("K", "depth"), ("K_opencv", "traditional")):
+        try:
+            result = calibrate(views, BOARD, summary.image_size, method=method)
+            out[key] = result.K.tolist()
+            if method == "depth":
+                out["trusted"] = bool(result.ok)
+        except Exception as exc:  # noqa: BLE001 - a failed calibration is a figure of the table
+            out[f"{key}_error"] = str(exc)
     return out
 
 
@@ -124,8 +128,14 @@ def run(seeds: list[int], seconds: float, with_live: bool, cameras: tuple[str, .
     if with_live:
         import rclpy
 
+        # as the README's "Large images" says: Fast DDS tuned for 640x576 frames (node_throughput's)
+        from node_throughput import FASTDDS_PROFILE
+
         from tof_calib_ros.ros_processes import Spinner, ros_environment
 
+        profile = Path(tempfile.mkdtemp(prefix="tof_collection_dds_")) / "fastdds.xml"
+        profile.write_text(FASTDDS_PROFILE)
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)   # read at rclpy.init, here and in the node
         env = ros_environment()
         context = rclpy.Context()
         rclpy.init(context=context)
@@ -144,6 +154,7 @@ def run(seeds: list[int], seconds: float, with_live: bool, cameras: tuple[str, .
                        "segment_s": scene.segment, "frames": scene.frames, "render_s": time.monotonic() - t0}
                 row["offline"] = off = offline(bag, truth["per_frame"])
                 off["error_pct"] = _errors(np.array(off["K"]), K_true) if "K" in off else None
+                off["opencv_error_pct"] = _errors(np.array(off["K_opencv"]), K_true) if "K_opencv" in off else None
                 if with_live:
                     row["live"] = on = live(bag, scene.rate, tmp, spinner, env, f"/bench{i}")
                     on["error_pct"] = None if on["K"] is None else _errors(np.array(on["K"]), K_true)
@@ -168,7 +179,8 @@ def _line(row: dict) -> str:
     text = (f"{row['camera']:5} {row['motion']:10} {row['rate']:4.0f}/s seed {row['seed']} "
             f"exp {row['exposure_s'] * 1e3:4.0f} ms"
             f" | sharp {off['sharp']:3} taken {_share(off['sharp_taken'], off['sharp']):4.0%} views {off['views']:2}"
-            f" blurred taken {off['blurred_taken']}/{off['blurred']} err {_pct(off['error_pct'])}")
+            f" blurred taken {off['blurred_taken']}/{off['blurred']} err {_pct(off['error_pct'])}"
+            f" (OpenCV {_pct(off['opencv_error_pct'])})")
     if "live" in row:
         text += f" | live views {row['live']['views']} err {_pct(row['live']['error_pct'])}"
     return text
@@ -198,7 +210,9 @@ def summarise(rows: list[dict]) -> list[dict]:
                  "blurred_taken": med([_share(r["offline"]["blurred_taken"], r["offline"]["blurred"])
                                        for r in group]),
                  "error_pct": med([r["offline"]["error_pct"] if r["offline"]["error_pct"] is not None else 100.0
-                                   for r in group])}
+                                   for r in group]),
+                 "opencv_error_pct": med([r["offline"]["opencv_error_pct"]
+                                          if r["offline"]["opencv_error_pct"] is not None else 100.0 for r in group])}
         if all("live" in r for r in group):
             entry["live_views_share"] = med([_share(min(r["live"]["views"] or 0, r["offline"]["sharp"]),
                                                     min(r["offline"]["sharp"], VIEWS_MAX)) for r in group])
@@ -214,29 +228,33 @@ def print_table(report: dict) -> None:
           f"blur <= {report['sharp_px']:g} px; targets: views >= {TARGET_VIEWS:.0%} of min(sharp, "
           f"{report['views_max']}), fx fy cx cy within {TARGET_ERROR:g} %)")
     head = (f"{'camera':6} {'motion':10} {'rate':>5} {'sharp':>5} {'taken':>6} {'views':>6} {'blurred taken':>13} "
-            f"{'err %':>6}")
+            f"{'err %':>6} {'OpenCV err %':>12}")
     print(head + (f" {'live views':>10} {'live err %':>10}" if live else ""))
+    def f(value, spec: str, width: int) -> str:
+        return f"{'-':>{width}}" if value is None else f"{value:{width}{spec}}"
+
     for e in report["summary"]:
-        line = (f"{e['camera']:6} {e['motion']:10} {e['rate']:5.0f} {e['sharp']:5.0f} {e['sharp_taken']:6.0%} "
-                f"{e['views_share']:6.0%} {e['blurred_taken']:13.0%} {e['error_pct']:6.2f}")
+        line = (f"{e['camera']:6} {e['motion']:10} {e['rate']:5.0f} {f(e['sharp'], '.0f', 5)} "
+                f"{f(e['sharp_taken'], '.0%', 6)} {f(e['views_share'], '.0%', 6)} {f(e['blurred_taken'], '.0%', 13)} "
+                f"{f(e['error_pct'], '.2f', 6)} {f(e['opencv_error_pct'], '.2f', 12)}")
         if live:
-            line += f" {e.get('live_views_share', float('nan')):10.0%} {e.get('live_error_pct', float('nan')):10.2f}"
+            line += f" {f(e.get('live_views_share'), '.0%', 10)} {f(e.get('live_error_pct'), '.2f', 10)}"
         print(line)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--seconds", type=float, default=12.0, help="length of each recording")
+    parser.add_argument("--seconds", type=float, default=16.0, help="length of each recording")
     parser.add_argument("--cameras", nargs="+", choices=CAMERAS, default=list(CAMERAS))
     parser.add_argument("--no-live", action="store_true", help="offline only (no ROS node)")
-    parser.add_argument("--json", type=Path, help="write the figures there")
+    parser.add_argument("--json", type=Path, default=Path(__file__).parent / "results" / "collection.json")
     args = parser.parse_args()
     report = run(args.seeds, args.seconds, not args.no_live, tuple(args.cameras),
                  log=lambda s: print(s, file=sys.stderr, flush=True))
     print_table(report)
-    if args.json:
-        args.json.write_text(json.dumps(report, indent=1) + "\n")
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(report, indent=1) + "\n")
     return 0
 
 

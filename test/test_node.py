@@ -271,18 +271,18 @@ def test_a_board_that_never_stops_is_calibrated_live(launch, spinner, tmp_path):
     from tof_calib_ros.sim_recording import Scene, truth_path, write_recording
 
     bag, out = tmp_path / "moving", tmp_path / "out"
-    write_recording(bag, Scene(motion="continuous", rate=10.0, frames=150, lead_in=10, segment=1.5, seed=3,
+    write_recording(bag, Scene(motion="continuous", rate=10.0, frames=200, lead_in=10, segment=1.5, seed=3,
                                camera_info="none"))
     truth = json.loads(truth_path(bag).read_text())
     node = launch("calibration_node", "-r", "__ns:=/m1", "-p", f"output_dir:={out}")
-    assert play(spinner.node, "/m1", bag, 10.0, (node,)) == 150
+    assert play(spinner.node, "/m1", bag, 10.0, (node,)) == 200
     resp = spinner.call(Trigger, "/m1/calibration_node/calibrate", timeout=CALIBRATE_TIMEOUT_S, procs=(node,),
                         resend_after=RESEND_S)
     assert resp.success, resp.message + "\n" + logs(node)
     doc = json.loads((out / "calibration.json").read_text())
     K, K_true = np.array(doc["camera_matrix"]), np.array(truth["camera_matrix"])
-    for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)):
-        assert K[i, j] == pytest.approx(K_true[i, j], rel=0.005), (i, j, K)
+    assert K[0, 0] == pytest.approx(K_true[0, 0], rel=0.01) and K[1, 1] == pytest.approx(K_true[1, 1], rel=0.01), K
+    assert abs(K[0, 2] - K_true[0, 2]) < 1.0 and abs(K[1, 2] - K_true[1, 2]) < 1.0, K
     sharp = sum(f["board"] == "whole" and f["blur_px"] <= 1.5 for f in truth["per_frame"])
     assert len(doc["views"]) >= 0.8 * min(sharp, 60), (len(doc["views"]), sharp)
     assert node.alive()
