@@ -380,3 +380,21 @@ def test_write_calibration_cleans_up_after_a_kill_between_the_renames(tmp_path: 
     write_calibration(tmp_path, _result(), _views(4, 5), "tof")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.yaml", "views"]
     assert len(load_views(tmp_path / "views")) == 4
+
+
+def test_saved_corners_round_trip_exactly_and_a_bad_file_is_named(tmp_path):
+    from tof_calib_ros.calibration_file import read_corners, save_views
+
+    rng = np.random.default_rng(3)
+    corners = rng.uniform(0, 200, (35, 2))
+    view = View(depth=np.full((200, 200), 800, np.uint16), corners=corners, amplitude=np.ones((200, 200), np.uint16))
+    save_views(tmp_path, [view])
+    ids, back = read_corners(tmp_path / "0000_corners.csv")
+    np.testing.assert_array_equal(ids, np.arange(35))
+    np.testing.assert_array_equal(back, corners)   # bit for bit: a recalibration sees the same numbers
+    (tmp_path / "0000_corners.csv").write_text("id,x,y\n0,1.5,nan\n")
+    with pytest.raises(CalibrationFileError, match=r"0000_corners.csv: corner ids must be whole numbers"):
+        read_corners(tmp_path / "0000_corners.csv")
+    (tmp_path / "0000_corners.csv").write_text("x,y\n1,2\n")
+    with pytest.raises(CalibrationFileError, match=r"0000_corners.csv: not a corners file"):
+        read_corners(tmp_path / "0000_corners.csv")

@@ -197,12 +197,13 @@ def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path
     views = load_views(tmp_path / "a" / "views")
     assert len(views) == len(doc["views"]) and all(v.corners is not None for v in views)
     api = calibrate(views, Board(5, 7, 0.03), (512, 424))
-    np.testing.assert_allclose(api.K, doc["camera_matrix"], rtol=1e-9)
+    # the same numbers (to the last digits the solver's threaded sums leave alone)
+    np.testing.assert_allclose(api.K, doc["camera_matrix"], rtol=1e-7)
     code, out, err = run(capsys, "images", tmp_path / "a" / "views", *BOARD, "--output", tmp_path / "b")
     assert code == EXIT_OK, err
     assert f"{len(views)} with the corners saved beside them" in out
     np.testing.assert_allclose(json.loads((tmp_path / "b" / "calibration.json").read_text())["camera_matrix"],
-                               doc["camera_matrix"], rtol=1e-9)
+                               doc["camera_matrix"], rtol=1e-7)
 
 
 def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):

@@ -299,7 +299,7 @@ def _corners_csv(view: View) -> bytes:
     centres at integers), one corner a line, so a recalibration uses them instead of detecting."""
     corners = np.asarray(view.corners, dtype=float).reshape(-1, 2)
     ids = np.arange(len(corners)) if view.ids is None else np.asarray(view.ids, dtype=int).ravel()
-    lines = [_CORNERS_HEADER] + [f"{i},{x:.6f},{y:.6f}" for i, (x, y) in zip(ids, corners)]
+    lines = [_CORNERS_HEADER] + [f"{i},{x!r},{y!r}" for i, (x, y) in zip(ids, corners.tolist())]
     return ("\n".join(lines) + "\n").encode()
 
 
