@@ -57,6 +57,9 @@ SHARP_HISTORY = 50
 # plane than the squares' centres are, and at least this far (m), comes from a board that moved.
 ARTEFACT_RATIO = 30.0
 ARTEFACT_MIN_M = 0.1
+# A full set swaps a view only for one this many times farther from the rest: each swap costs an
+# accurate detection, and swaps for a marginal gain would churn on every frame of a long recording.
+SWAP_GAIN = 1.5
 
 
 def _real(value: object) -> bool:
@@ -271,8 +274,9 @@ class ViewCollector:
 
     def _redundant(self, params: np.ndarray) -> int | None:
         """The kept view a new one at ``params`` should replace once the set is full: the one
-        nearest to another kept view, if the new view is farther than that from all the rest and
-        that view holds no axis' lowest or highest value (progress must never fall)."""
+        nearest to another kept view, if the new view is ``SWAP_GAIN`` times farther than that
+        from all the rest and that view holds no axis' lowest or highest value (progress must
+        never fall)."""
         kept = np.array(self._params)
         d = np.abs(kept[:, None, :] - kept[None, :, :]).sum(axis=2)
         np.fill_diagonal(d, np.inf)
@@ -282,7 +286,7 @@ class ViewCollector:
             if int(i) in ends:
                 continue
             others = np.delete(kept, i, axis=0)
-            if np.abs(others - params).sum(axis=1).min() > d[i].min():
+            if np.abs(others - params).sum(axis=1).min() > SWAP_GAIN * d[i].min():
                 return int(i)
             return None
         return None
