@@ -129,13 +129,11 @@ def run(seeds: list[int], seconds: float, with_live: bool, cameras: tuple[str, .
         import rclpy
 
         # as the README's "Large images" says: Fast DDS tuned for 640x576 frames (node_throughput's)
-        from node_throughput import FASTDDS_PROFILE
+        from node_throughput import use_tuned_fast_dds
 
         from tof_calib_ros.ros_processes import Spinner, ros_environment
 
-        profile = Path(tempfile.mkdtemp(prefix="tof_collection_dds_")) / "fastdds.xml"
-        profile.write_text(FASTDDS_PROFILE)
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)   # read at rclpy.init, here and in the node
+        use_tuned_fast_dds(Path(tempfile.mkdtemp(prefix="tof_collection_dds_")))
         env = ros_environment()
         context = rclpy.Context()
         rclpy.init(context=context)

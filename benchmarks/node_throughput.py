@@ -104,6 +104,14 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+def use_tuned_fast_dds(directory: Path) -> None:
+    """Fast DDS tuned for large frames (``FASTDDS_PROFILE``) for this process and the nodes it
+    starts: read at rclpy.init, so call it before."""
+    profile = directory / "fastdds_large_frames.xml"
+    profile.write_text(FASTDDS_PROFILE)
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
+
+
 @dataclass(frozen=True)
 class Camera:
     name: str
@@ -484,9 +492,7 @@ def run(quick: bool, default_transport: bool = False, log=print) -> dict:
     checkpoints = (1000, 2500) if quick else (1000, 10000)
     workdir = Path(tempfile.mkdtemp(prefix="tof_calib_bench_"))
     if not default_transport:
-        dds_profile = workdir / "fastdds_large_frames.xml"
-        dds_profile.write_text(FASTDDS_PROFILE)
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(dds_profile)   # read at rclpy.init, here and in the node
+        use_tuned_fast_dds(workdir)
     env = ros_environment()
     context = rclpy.Context()
     rclpy.init(context=context)

@@ -281,15 +281,11 @@ class ViewCollector:
         d = np.abs(kept[:, None, :] - kept[None, :, :]).sum(axis=2)
         np.fill_diagonal(d, np.inf)
         ends = set(np.argmin(kept, axis=0)) | set(np.argmax(kept, axis=0))
-        order = np.argsort(d.min(axis=1))
-        for i in order:
-            if int(i) in ends:
-                continue
-            others = np.delete(kept, i, axis=0)
-            if np.abs(others - params).sum(axis=1).min() > SWAP_GAIN * d[i].min():
-                return int(i)
+        i = next((int(i) for i in np.argsort(d.min(axis=1)) if int(i) not in ends), None)
+        if i is None:
             return None
-        return None
+        others = np.delete(kept, i, axis=0)
+        return i if np.abs(others - params).sum(axis=1).min() > SWAP_GAIN * d[i].min() else None
 
     def _off_image(self, corners: np.ndarray, w: int, h: int) -> str | None:
         """Why the board is not wholly in the image with room to spare, or None when it is."""
@@ -324,7 +320,7 @@ class ViewCollector:
         if blur > cfg.max_blur_px:
             return (f"motion blur: the board's edges are {across:.1f} px wide across the motion where sharp ones "
                     f"are {sharp:.1f} px, a blur of {blur:.1f} px (limit {cfg.max_blur_px:g} px)")
-        edges, centres = edge_depth_error(depth_in_metres(depth_m), corners, self.board)
+        edges, centres = edge_depth_error(depth_m, corners, self.board)
         if edges > max(ARTEFACT_RATIO * centres, ARTEFACT_MIN_M):
             return (f"motion artefacts in the depth: the squares' edges lie {edges * 1e3:.0f} mm off the board's "
                     f"plane, its squares {centres * 1e3:.1f} mm (a board moving while the phases are taken)")

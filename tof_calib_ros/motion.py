@@ -18,6 +18,7 @@ import numpy as np
 
 from .core.board import Board
 from .core.detection import tone_map
+from .core.pipeline import depth_in_metres, depth_units
 
 # Profile across an edge: this far into each square (a fraction of the square), in steps of this many px.
 PROFILE_REACH = 0.45
@@ -93,22 +94,23 @@ def edge_blur_px(amplitude: np.ndarray, corners: np.ndarray, board: Board) -> tu
     return max(widths), min(widths)
 
 
-def edge_depth_error(depth_m: np.ndarray, corners: np.ndarray, board: Board) -> tuple[float, float]:
+def edge_depth_error(depth: np.ndarray, corners: np.ndarray, board: Board) -> tuple[float, float]:
     """Median distance (m) of the depth on the squares' edges, and of the depth at the squares'
     centres, from the plane through the centres (fitted as 1 / depth, which a plane makes linear
     in the pixel coordinates). Noise alone puts both at about the noise; a board that moved puts
-    the edges far off."""
+    the edges far off. ``depth`` as ``calibrate`` reads it (integer millimetres, float metres):
+    only the pixels sampled are converted."""
     grid = corners.reshape(board.rows, board.cols, 2)
     centres = (0.25 * (grid[:-1, :-1] + grid[:-1, 1:] + grid[1:, :-1] + grid[1:, 1:])).reshape(-1, 2)
     edges = np.concatenate([a[:, 0] + f * (a[:, 1] - a[:, 0]) for a in _edges(corners, board) for f in ALONG])
-    h, w = depth_m.shape
+    h, w = depth.shape
+    units = depth_units(depth)
 
     def at(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = np.rint(points).astype(int)
         ok = (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
         z = np.full(len(p), np.nan)
-        z[ok] = depth_m[p[ok, 1], p[ok, 0]]
-        z[~(z > 0)] = np.nan
+        z[ok] = depth_in_metres(depth[p[ok, 1], p[ok, 0]], units)
         return points, z
 
     (pc, zc), (pe, ze) = at(centres), at(edges)

@@ -90,10 +90,12 @@ PARAMETERS = {
                                     floats=(0.0, 1.0))),
     "views.min": (8, _descriptor("views needed before calibrating", ints=(3, 1000))),
     "views.max": (60, _descriptor("views kept at most (memory stays bounded)", True, (3, 1000))),
-    "motion.exposure": (0.005, _descriptor("how long a frame is exposed (all its phases), s: the board's speed "
-                                          "times this is its blur", True, floats=(1e-5, 1.0))),
-    "motion.max_blur_px": (1.5, _descriptor("a frame whose board moved farther than this while it was "
-                                            "exposed is not a view, px", True, floats=(0.1, 100.0))),
+    "motion.exposure": (CollectorConfig.exposure_s, _descriptor(
+        "how long a frame is exposed (all its phases), s: the board's speed times this is its blur", True,
+        floats=(1e-5, 1.0))),
+    "motion.max_blur_px": (CollectorConfig.max_blur_px, _descriptor(
+        "a frame whose board moved farther than this while it was exposed is not a view, px", True,
+        floats=(0.1, 100.0))),
     "camera_name": ("tof_camera", _descriptor("camera_name written into the calibration file")),
     "output_dir": ("~/.ros/tof_calib", _descriptor("where calibration.yaml, calibration.json and views/ go")),
     "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",

@@ -113,17 +113,16 @@ def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorCon
     for source in sources:
         try:
             amplitude = source.load()
-            if config.stills:
-                saved = source.saved_corners()
+            saved = source.saved_corners() if config.stills else None
         except FrameError as exc:
             out.append(Skip(exc.kind, "", str(exc)))
             tracker.forget()
             continue
+        if saved is not None:   # a view the node or tof_calib kept: the corners it was calibrated with
+            known = Detection(saved, "the corners saved with the view")
+            out.append(Located(known, known))
+            continue
         if config.stills:
-            if saved is not None:   # a view the node or tof_calib kept: the corners it was calibrated with
-                known = Detection(saved, "the corners saved with the view")
-                out.append(Located(known, known))
-                continue
             found = quick_locate(amplitude, board, thorough=True)
             out.append(Located(found, None if found.corners is None else
                                accurate_detect(amplitude, board, found.corners, config.detect_in_region)))

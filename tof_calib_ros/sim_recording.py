@@ -27,6 +27,7 @@ import numpy as np
 from . import sim
 from .bag_io import BagWriter
 from .core.board import Board
+from .core.camera import project, transform
 from .core.errors import CalibrationError
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
@@ -153,7 +154,8 @@ def render_frames(scene: Scene) -> Iterator[tuple[sim.Frame, dict]]:
             R = cv2.Rodrigues(frame.rvec)[0]
             points = board.object_points()
             whole = sim.in_view(camera, outline @ R.T + frame.tvec, WHOLE_MARGIN_PX)
-            seen = bool(np.any((frame.corners >= 0) & (frame.corners <= [camera.width - 1, camera.height - 1])))
+            inside = (frame.corners >= 0) & (frame.corners <= [camera.width - 1, camera.height - 1])
+            seen = bool(np.any(np.all(inside, axis=1)))   # a corner in the image, both coordinates
             blur = 0.0 if end is None else float(np.max(np.linalg.norm(
                 _project(camera, end, points) - _project(camera, start, points), axis=1)))
             truth = {"board": "whole" if whole else "partial" if seen else "none", "blur_px": round(blur, 4)}
@@ -161,8 +163,8 @@ def render_frames(scene: Scene) -> Iterator[tuple[sim.Frame, dict]]:
 
 
 def _project(camera: sim.SimCamera, pose: Pose, points: np.ndarray) -> np.ndarray:
-    R = cv2.Rodrigues(np.asarray(pose[0], dtype=float).reshape(3, 1))[0]
-    return cv2.projectPoints(points, R, np.asarray(pose[1], dtype=float), camera.K, camera.D)[0].reshape(-1, 2)
+    """Board points in the image at ``pose``, as the renderer's truth corners are projected."""
+    return project(transform(*pose, points)[0], camera.params).pixels
 
 
 def truth_path(bag: str | Path) -> Path:
