@@ -125,8 +125,9 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
         upscale = min(gray.shape) < UPSCALE_BELOW
     reasons = []
 
-    # SB corners are not passed through cornerSubPix: its ACCURACY mode is already sub-pixel,
-    # and on rendered views cornerSubPix made them worse (0.05 -> 0.10 px RMS).
+    # SB corners are not passed through cornerSubPix: its ACCURACY mode is already sub-pixel.
+    # cornerSubPix removes SB's small bias on rendered views but doubles the noise on the real
+    # Kinect v2 views (0.13 -> 0.24 px RMS) and leaves their halves no closer (README, limitations).
     corners = _detect_sb(gray, board, upscale)
     if corners is None:
         reasons.append("SB detector found no board")
