@@ -20,7 +20,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
     ] + launchers,
     install_requires=["setuptools", "numpy", "scipy", "opencv-python-headless", "threadpoolctl", "PyYAML",
-                      "rosbags", "matplotlib", "tqdm", "psutil"],
+                      "rosbags", "mcap", "matplotlib", "tqdm", "psutil"],
     extras_require={
         "ros": ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"],
         "test": ["pytest", "hypothesis"],

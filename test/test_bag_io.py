@@ -30,12 +30,13 @@ def _images(i: int, h: int = 6, w: int = 8) -> tuple[np.ndarray, np.ndarray]:
             rng.integers(500, 3000, (h, w), dtype=np.uint16))
 
 
-def _bag(tmp_path: Path, storage: str, frames: int = 5, info: bool = True, name: str = "bag") -> Path:
+def _bag(tmp_path: Path, storage: str, frames: int = 5, info: bool = True, name: str = "bag",
+         size: tuple[int, int] = (6, 8)) -> Path:
     path = tmp_path / (name + (".bag" if storage == "ros1" else ""))
     with BagWriter(path, storage) as bag:
         for i in range(frames):
             stamp = 100.0 + 0.1 * i
-            amplitude, depth = _images(i)
+            amplitude, depth = _images(i, *size)
             bag.write(AMP, bag.image_message(amplitude, "mono16", stamp, "tof"), stamp)
             bag.write(DEPTH, bag.image_message(depth, "16UC1", stamp + 0.001, "tof"), stamp + 0.001)
             if info:
@@ -176,7 +177,7 @@ def test_bags_that_cannot_be_opened(tmp_path):
     damaged = _bag(tmp_path, "sqlite3", name="damaged")
     db = next(damaged.glob("*.db3"))
     db.write_bytes(db.read_bytes()[:2048])   # the recording cut short
-    with pytest.raises(BagError, match="damaged: cannot open the bag"):
+    with pytest.raises(BagError, match="damaged: cannot open the bag.*SQLite refuses a cut-off or damaged file whole"):
         BagSource(damaged).__enter__()
     only = tmp_path / "only"
     with BagWriter(only) as bag:
@@ -252,6 +253,37 @@ def test_a_bag_damaged_midway_gives_the_frames_before_the_damage(tmp_path):
         frames, skips = _frames(source)
     assert 5 < len(frames) < 40
     assert [s.kind for s in skips] == ["read_error"] and "reading stopped" in skips[0].reason
+
+
+@pytest.mark.parametrize("metadata", [True, False])
+def test_a_cut_off_mcap_recording_gives_every_frame_before_the_cut(tmp_path, metadata):
+    """A recorder killed mid-recording: the MCAP file ends mid-chunk, without its summary,
+    and (when it died before closing) without metadata.yaml."""
+    path = _bag(tmp_path, "mcap", frames=40, info=True, size=(200, 200))   # 160 kB a frame: a few a chunk
+    file = next(path.glob("*.mcap"))
+    whole = file.read_bytes()
+    with BagSource(path) as source:
+        every, _ = _frames(source)
+    assert len(every) == 40
+    if not metadata:
+        (path / "metadata.yaml").unlink()
+    seen = []
+    for fraction in (0.3, 0.55, 0.8, 0.97):
+        file.write_bytes(whole[:int(len(whole) * fraction)])
+        with BagSource(path) as source:
+            assert "read in order" in source.storage and source.camera_info is not None
+            frames, skips = _frames(source)
+        assert [s.kind for s in skips] == ["read_error"] and "every message before the cut" in skips[0].reason
+        # the frames before the cut, each exactly as written
+        assert [f.stamp for f in frames] == [f.stamp for f in every[:len(frames)]]
+        for got, want in zip(frames, every):
+            assert all(np.array_equal(a, b) for a, b in zip(got.decode(), want.decode()))
+        seen.append(len(frames))
+    # all but the frames of the chunk that was cut (the writer's chunks hold 1 MB)
+    assert seen == sorted(seen) and seen[0] >= 5 and seen[-1] >= 32
+    file.write_bytes(whole[:20])   # the magic and a few bytes: no message at all
+    with pytest.raises(BagError, match="read in order, it holds no message either"):
+        BagSource(path).__enter__()
 
 
 # -- property: whatever a bag holds, reading it yields frames or named skips ---------------------

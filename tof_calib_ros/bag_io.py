@@ -25,8 +25,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
+from .bag_salvage import SalvageReader, mcap_files
 from .core.errors import CalibrationError
-from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, decode_image, depth_to_metres
+from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
 from .replay import FrameError, Skip
 from .stamp_sync import StampSync
 
@@ -72,6 +73,8 @@ class ImageFields:
     def load(self) -> np.ndarray:
         try:
             return decode_image(self)
+        except ImageTooLarge as exc:
+            raise FrameError("too_large", str(exc)) from None
         except ImageError as exc:   # the encodings were checked on reading: the data is at fault
             raise FrameError("layout", str(exc)) from None
 
@@ -205,7 +208,7 @@ class BagSource:
         self.slop, self.depth_scale = slop, depth_scale
         self._requested = (amplitude, depth, camera_info)
         self._flags = flags
-        self._reader: AnyReader | None = None
+        self._reader: AnyReader | SalvageReader | None = None
         self.unpaired = {"amplitude": 0, "depth": 0}
 
     def __enter__(self) -> BagSource:
@@ -216,8 +219,7 @@ class BagSource:
             self._reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
             self._reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on a damaged file
-            self._reader = None
-            raise BagError(f"{self.path}: cannot open the bag ({_describe(exc)})") from None
+            self._reader = self._salvage(exc)
         try:
             types = {t: info.msgtype for t, info in self._reader.topics.items()}
             self.topics = choose_topics(types, *self._requested, flags=self._flags)
@@ -230,6 +232,22 @@ class BagSource:
     def __exit__(self, *_exc: object) -> None:
         self.close()
 
+    def _salvage(self, exc: Exception) -> SalvageReader:
+        """A recording rosbags cannot open: an MCAP one cut off (a recorder killed mid-way leaves
+        no summary and no metadata.yaml) is read record by record up to the cut."""
+        why = f"{self.path}: cannot open the bag ({_describe(exc)})"
+        files = mcap_files(self.path)
+        if not files:
+            if "malformed" in str(exc) and any(self.path.glob("*.db3")):
+                why += ("; SQLite refuses a cut-off or damaged file whole, so nothing of it can be read "
+                        "(record in mcap, Jazzy's default storage: a cut-off mcap is read up to the cut)")
+            raise BagError(why) from None
+        reader = SalvageReader(files)
+        if not reader.connections:
+            raise BagError(f"{why}; read in order, it holds no message either"
+                           + (f" ({reader.cut})" if reader.cut else "")) from None
+        return reader
+
     def close(self) -> None:
         if self._reader is not None:
             self._reader.close()
@@ -239,6 +257,8 @@ class BagSource:
     def storage(self) -> str:
         if not self._reader.is2:
             return "ROS 1 bag"
+        if isinstance(self._reader, SalvageReader):
+            return "mcap, read in order up to where it ends (no summary or metadata.yaml)"
         return "rosbag2 " + ("mcap" if any(self.path.glob("*.mcap*")) else "sqlite3")
 
     @property
@@ -307,6 +327,9 @@ class BagSource:
                 pairs += 1
                 yield BagFrame(stamp, f"frame at {stamp:.3f} s", pair[0], pair[1], self.depth_scale)
         self.unpaired = {"amplitude": used[topics.amplitude] - pairs, "depth": used[topics.depth] - pairs}
+        if isinstance(self._reader, SalvageReader) and self._reader.cut:
+            yield Skip("read_error", str(self.path), f"the recording is cut off, every message before the cut was "
+                                                     f"read ({self._reader.cut})")
 
 
 def _describe(exc: BaseException) -> str:
