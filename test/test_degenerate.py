@@ -187,7 +187,7 @@ def test_corners_outside_the_image(method, tilted):
 # ---------------------------------------------------------------------------------------------
 # depth
 
-@pytest.mark.parametrize("value", [0.7, 1e30, 1e-30])
+@pytest.mark.parametrize("value", [0.7, 45.0, 1e-30])
 def test_constant_depth_contradicts_the_corners(value, tilted):
     views = [View(np.full_like(f.depth, value), f.corners) for f in tilted]
     _refused(_calibrate(views, "depth"), "the depth images do not show the board")
@@ -202,8 +202,8 @@ def test_constant_radial_depth_is_flagged(tilted):
 
 @pytest.mark.parametrize("invalid", [
     lambda d: np.zeros_like(d), lambda d: np.full_like(d, np.nan), lambda d: np.full_like(d, np.inf),
-    lambda d: np.full_like(d, -0.7), lambda d: np.zeros(d.shape, np.uint16)],
-    ids=["zero", "nan", "inf", "negative", "uint16-zero"])
+    lambda d: np.full_like(d, -0.7), lambda d: np.zeros(d.shape, np.uint16), lambda d: np.full_like(d, 1e30)],
+    ids=["zero", "nan", "inf", "negative", "uint16-zero", "beyond-any-range"])
 def test_all_depth_invalid(invalid, tilted):
     views = [View(invalid(f.depth), f.corners) for f in tilted]
     _refused(_calibrate(views, "depth"), "no valid depth at any corner of any view")

@@ -124,8 +124,9 @@ def test_depth_16uc1_millimetres_and_scale() -> None:
     image = np.array([[0, 1, 1500, 65535]], dtype=np.uint16)
     metres = depth_to_metres(image, "16UC1")
     assert metres.dtype == np.float64
-    np.testing.assert_array_equal(np.isnan(metres), [[True, False, False, False]])
-    np.testing.assert_allclose(metres[0, 1:], [0.001, 1.5, 65.535])
+    # 0 is invalid, and so is 65535 mm: beyond any ToF camera's range (MAX_DEPTH_M), a driver's sentinel
+    np.testing.assert_array_equal(np.isnan(metres), [[True, False, False, True]])
+    np.testing.assert_allclose(metres[0, 1:3], [0.001, 1.5])
     np.testing.assert_allclose(depth_to_metres(image, "16UC1", scale_16u=0.0001)[0, 1:], [0.0001, 0.15, 6.5535])
 
 

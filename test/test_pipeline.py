@@ -106,8 +106,9 @@ def test_clear_errors_for_bad_input():
         calibrate(views, BOARD, depth_convention="disparity")
     with pytest.raises(CalibrationError, match="plane_squares must be one of 'white', 'all'"):
         calibrate(views, BOARD, plane_squares="black")
-    with pytest.raises(CalibrationError, match="2x2"):
-        Board(1, 5, 0.03)
+    for cols in (1, 2):   # OpenCV's detectors raise on 2 a side
+        with pytest.raises(CalibrationError, match="at least 3x3 interior corners"):
+            Board(cols, 5, 0.03)
 
 
 def test_parallel_views_are_refused():

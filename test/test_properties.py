@@ -20,6 +20,7 @@ from hypothesis.extra import numpy as hnp
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
 from tof_calib_ros.calibration_file import CalibrationFileError, read_camera_yaml, write_camera_yaml
 from tof_calib_ros.collector import CollectorConfig
+from tof_calib_ros.core.pipeline import MAX_DEPTH_M
 from tof_calib_ros.image_decode import ENCODINGS, ImageError, decode_image, depth_to_metres
 
 DECODE = settings(max_examples=200, deadline=None)
@@ -158,7 +159,8 @@ def test_float_depth_is_metres_with_every_invalid_value_nan(image):
     with np.errstate(all="raise"):
         metres = depth_to_metres(image, "32FC1")
     assert metres.dtype == np.float64 and metres.shape == image.shape
-    valid = np.array([[math.isfinite(v) and v > 0 for v in row] for row in image.tolist()], dtype=bool)
+    valid = np.array([[math.isfinite(v) and 0 < v <= MAX_DEPTH_M for v in row] for row in image.tolist()],
+                     dtype=bool)
     np.testing.assert_array_equal(np.isnan(metres), ~valid)
     np.testing.assert_array_equal(metres[valid], image[valid].astype(np.float64))
 
@@ -169,9 +171,9 @@ def test_float_depth_is_metres_with_every_invalid_value_nan(image):
 def test_integer_depth_is_counts_times_scale_with_zero_invalid(image, scale):
     with np.errstate(all="raise"):
         metres = depth_to_metres(image, "16UC1", scale)
-    np.testing.assert_array_equal(np.isnan(metres), image == 0)
+    np.testing.assert_array_equal(np.isnan(metres), (image == 0) | (image * scale > MAX_DEPTH_M))
     for count, m in zip(image.ravel().tolist(), metres.ravel().tolist()):
-        assert count == 0 or m == count * scale
+        assert count == 0 or count * scale > MAX_DEPTH_M or m == count * scale
 
 
 @DECODE

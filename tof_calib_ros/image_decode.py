@@ -21,10 +21,24 @@ ENCODINGS: dict[str, np.dtype] = {
 }
 # REP 118: 16UC1 depth is in millimetres (by default), 32FC1 in metres
 DEPTH_ENCODINGS = ("16UC1", "32FC1")
+# Images beyond this many pixels are refused before they are decoded: ToF sensors have at most
+# about 1 Mpx, and judging a 64 Mpx frame took the node 6 GB.
+MAX_PIXELS = 4096 * 4096
+
+
+def check_pixels(width: int, height: int, where: str = "image") -> None:
+    """ImageTooLarge when an image of this size is beyond ``MAX_PIXELS``."""
+    if width * height > MAX_PIXELS:
+        raise ImageTooLarge(f"{where} is {width}x{height} = {width * height / 1e6:.0f} Mpx, more than the "
+                         f"{MAX_PIXELS / 1e6:.1f} Mpx accepted (ToF sensors have about 1 Mpx at most)")
 
 
 class ImageError(CalibrationError):
     """An image message that cannot be decoded; a CalibrationError so one handler catches both."""
+
+
+class ImageTooLarge(ImageError):
+    """An image beyond ``MAX_PIXELS``, refused before it is decoded."""
 
 
 def _integer(value: Any, name: str) -> int:
@@ -72,6 +86,7 @@ def decode_image(msg: Any) -> np.ndarray:
     height, width, step = (_integer(_field(msg, name), name) for name in ("height", "width", "step"))
     if height == 0 or width == 0:
         raise ImageError(f"image is empty ({width}x{height})")
+    check_pixels(width, height)
     row_bytes = width * pixel.itemsize
     if step < row_bytes:
         raise ImageError(f"image step {step} is less than width x bytes per pixel = {row_bytes} ({encoding})")

@@ -10,6 +10,7 @@ in name order; each is a still, so the collector's motion check does not apply t
 from __future__ import annotations
 
 import re
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
 from .core.pipeline import depth_in_metres
+from .image_decode import ImageTooLarge, check_pixels
 from .replay import FrameError, Skip
 
 EXTENSIONS = (".png", ".tif", ".tiff", ".npy")
@@ -29,16 +31,55 @@ _DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
 def _read(path: Path) -> np.ndarray:
     try:
+        size = _header_size(path)
+        if size is not None:
+            check_pixels(*size, where=path.name)
         image = (np.load(path, allow_pickle=False) if path.suffix.lower() == ".npy"
                  else cv2.imread(str(path), cv2.IMREAD_UNCHANGED))
-    except (OSError, ValueError) as exc:
-        raise FrameError("unreadable", f"{path.name}: {exc}") from None
+    except ImageTooLarge as exc:
+        raise FrameError("too_large", str(exc)) from None
+    except (OSError, ValueError, MemoryError, struct.error) as exc:
+        raise FrameError("unreadable", f"{path.name}: {type(exc).__name__}: {exc}") from None
     if image is None:
         raise FrameError("unreadable", f"{path.name}: missing or not a readable image")
     if image.ndim != 2 or image.dtype.type not in _DTYPES:
         raise FrameError("encoding", f"{path.name}: {image.dtype} image of shape {image.shape}; need one "
                                      "channel of uint8, uint16, int16 or float")
     return image
+
+
+def _header_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from the file's header, read before the image is: a small file may hold a
+    huge image (a 20000x20000 PNG of 836 kB). None where the header does not say (the decoder
+    then finds out what it is)."""
+    with open(path, "rb") as f:
+        head = f.read(32)
+        if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR":
+            return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+        if head[:4] in (b"II*\x00", b"MM\x00*"):
+            return _tiff_size(f, "<" if head[:2] == b"II" else ">", int.from_bytes(head[4:8], _ORDER[head[:2]]))
+        if head.startswith(b"\x93NUMPY"):
+            f.seek(0)
+            version = np.lib.format.read_magic(f)
+            shape = (np.lib.format.read_array_header_1_0(f) if version == (1, 0)
+                     else np.lib.format.read_array_header_2_0(f))[0]
+            return (int(shape[1]), int(shape[0])) if len(shape) == 2 else (int(np.prod(shape)), 1)
+    return None
+
+
+_ORDER = {b"II": "little", b"MM": "big"}
+
+
+def _tiff_size(f, endian: str, offset: int) -> tuple[int, int] | None:
+    """ImageWidth (256) and ImageLength (257) from a TIFF's first directory."""
+    f.seek(offset)
+    (count,) = struct.unpack(endian + "H", f.read(2))
+    found = {}
+    for _ in range(min(count, 512)):
+        tag, kind, _n, value = struct.unpack(endian + "HHI4s", f.read(12))
+        if tag in (256, 257):
+            found[tag] = struct.unpack(endian + ("H" if kind == 3 else "I"), value[:2 if kind == 3 else 4])[0]
+    return (found[256], found[257]) if len(found) == 2 else None
 
 
 @dataclass(frozen=True)

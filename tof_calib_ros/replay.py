@@ -39,6 +39,7 @@ SKIP_KINDS = {
     "encoding": "unsupported image encoding",
     "layout": "image data does not match its step x height (or a bad step)",
     "size": "image of another size",
+    "too_large": "image beyond the pixel limit (image_decode.MAX_PIXELS), not decoded",
     "stamp_order": "header stamp not after the previous one on its topic",
     "unreadable": "image file missing or unreadable",
     "read_error": "the rest of the bag could not be read",

@@ -16,6 +16,7 @@ from .errors import CalibrationError
 
 # Beyond these a board is a typo (or millimetres given as metres), not a calibration target.
 MAX_CORNERS_PER_SIDE = 1000
+MIN_CORNERS_PER_SIDE = 3
 MIN_SQUARE_M = 1e-3
 MAX_SQUARE_M = 10.0
 
@@ -43,8 +44,9 @@ class Board:
         cols, rows = whole_number(self.cols), whole_number(self.rows)
         if cols is None or rows is None:
             raise CalibrationError(f"board size must be whole numbers, got {self.cols!r}x{self.rows!r}")
-        if cols < 2 or rows < 2:
-            raise CalibrationError(f"board must have at least 2x2 interior corners, got {cols}x{rows}")
+        if cols < MIN_CORNERS_PER_SIDE or rows < MIN_CORNERS_PER_SIDE:
+            raise CalibrationError(f"board must have at least {MIN_CORNERS_PER_SIDE}x{MIN_CORNERS_PER_SIDE} interior "
+                                   f"corners (OpenCV's detectors need 3 a side), got {cols}x{rows}")
         if cols > MAX_CORNERS_PER_SIDE or rows > MAX_CORNERS_PER_SIDE:
             raise CalibrationError(f"board must have at most {MAX_CORNERS_PER_SIDE} interior corners a side, "
                                    f"got {cols}x{rows}")

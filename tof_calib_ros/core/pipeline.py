@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -73,16 +74,23 @@ class _Prepared:
     amplitude: np.ndarray | None
 
 
+# ToF cameras measure to some tens of metres at most: farther is a driver's sentinel (65535 mm) or
+# a glitch, and left in, such values overflow the plane fits.
+MAX_DEPTH_M = 50.0
+
+
 def depth_units(depth: np.ndarray) -> float:
     """Metres a count, unless told: integer images are millimetres, float ones metres."""
     return 1e-3 if np.issubdtype(np.asarray(depth).dtype, np.integer) else 1.0
 
 
 def depth_in_metres(depth: np.ndarray, units: float | None = None) -> np.ndarray:
-    """Float metres with NaN for invalid pixels (``units`` as ``depth_units`` unless told)."""
+    """Float metres with NaN for invalid pixels (``units`` as ``depth_units`` unless told):
+    0, NaN and anything beyond ``MAX_DEPTH_M``."""
     d = np.asarray(depth)
-    out = d.astype(np.float64) * (depth_units(d) if units is None else units)
-    out[~np.isfinite(out) | (out <= 0)] = np.nan
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = d.astype(np.float64) * (depth_units(d) if units is None else units)
+        out[~(out > 0) | ~(out <= MAX_DEPTH_M)] = np.nan
     return out
 
 
@@ -359,6 +367,20 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     # The linear algebra here is small: BLAS threads only contend (with each other and with
     # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
     _check_arguments(views, board, image_size, depth_units, min_views, progress)
+    try:
+        return _calibrate_with_loss(views, board, image_size, depth_convention, method, depth_units, depth_bias,
+                                   distortion, loss, plane_squares, min_views, progress)
+    except CalibrationError:   # a ValueError too, and already the caller's
+        raise
+    except (cv2.error, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+        # views no check above foresaw (OpenCV asserting on a degenerate set, a singular system):
+        # the caller gets a CalibrationError, as for every other refusal
+        raise CalibrationError(f"the views cannot be calibrated: {type(exc).__name__}: "
+                               f"{' '.join(str(exc).split())[:200]}") from exc
+
+
+def _calibrate_with_loss(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion,
+                        loss, plane_squares, min_views, progress) -> CalibrationResult:
     with threadpool_limits(1):
         result = _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
                             distortion, loss, plane_squares, min_views, progress)
