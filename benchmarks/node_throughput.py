@@ -53,9 +53,10 @@ from pathlib import Path
 import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
-from tof_calib_ros.calibration_file import load_views, write_calibration
+from tof_calib_ros.calibration_file import load_views
 from tof_calib_ros.collector import CollectorConfig, ViewCollector
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
+from tof_calib_ros.output_folder import write_calibration
 from tof_calib_ros.tracking import BoardTracker, quick_locate
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -20,11 +20,11 @@ from tof_calib_ros.calibration_file import (
     load_views,
     read_camera_yaml,
     save_views,
-    write_calibration,
     write_camera_yaml,
     write_json,
 )
 from tof_calib_ros.core.result import CalibrationResult, ViewReport
+from tof_calib_ros.output_folder import write_calibration
 
 K = np.array([[500.0, 0.0, 320.25], [0.0, 501.5, 240.125], [0.0, 0.0, 1.0]])
 D = np.array([0.1, -0.25, 0.001, -0.002, 0.0])
@@ -271,10 +271,10 @@ def test_json_extra_may_not_overwrite_the_result(tmp_path: Path) -> None:
 def test_save_views_round_trip(tmp_path: Path) -> None:
     rng = np.random.default_rng(1)
     metres = rng.uniform(0.4, 4.5, (6, 8))
-    metres[0, :4] = [np.nan, 0.0, -1.0, 70.0]   # invalid, or beyond what uint16 mm holds
+    metres[0, :4] = [np.nan, 0.0, -1.0, 70.0]   # invalid, or beyond MAX_DEPTH_M (and uint16 mm)
     ir16 = rng.integers(0, 65535, (6, 8), endpoint=True).astype(np.uint16)
     ir8 = rng.integers(0, 255, (6, 8), endpoint=True).astype(np.uint8)
-    mm = rng.integers(0, 65535, (6, 8), endpoint=True).astype(np.uint16)
+    mm = rng.integers(0, 50000, (6, 8), endpoint=True).astype(np.uint16)   # up to MAX_DEPTH_M
     views = [View(depth=metres, amplitude=ir16), View(depth=mm, amplitude=ir8)]
     paths = save_views(tmp_path, views)
     assert [p.name for p in paths] == ["0000_ir.png", "0000_depth.png", "0001_ir.png", "0001_depth.png"]
@@ -347,39 +347,6 @@ def test_views_encoded_ahead_are_written_as_the_views_themselves(tmp_path: Path)
     direct, ahead = sorted((tmp_path / "direct" / "views").iterdir()), sorted((tmp_path / "ahead" / "views").iterdir())
     assert [p.name for p in direct] == [p.name for p in ahead] and len(direct) == 6
     assert all(a.read_bytes() == b.read_bytes() for a, b in zip(direct, ahead))
-
-
-def test_write_calibration_replaces_the_views_whole(tmp_path: Path) -> None:
-    write_calibration(tmp_path, _result(), _views(5, 7), "tof")
-    assert len(load_views(tmp_path / "views")) == 5
-    path = write_calibration(tmp_path, _result(K * [[2], [2], [1]]), _views(3, 9), "tof")
-    views = load_views(tmp_path / "views")
-    assert len(views) == 3 and all(int(v.amplitude[0, 0]) == 9 for v in views)   # none of the 5 left behind
-    assert path == tmp_path / "calibration.yaml" and read_camera_yaml(path).K[0, 0] == 2 * K[0, 0]
-    assert json.loads((tmp_path / "calibration.json").read_text())["camera_matrix"][0][0] == 2 * K[0, 0]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.yaml", "views"]
-
-
-def test_write_calibration_refuses_before_changing_anything(tmp_path: Path) -> None:
-    write_calibration(tmp_path, _result(), _views(2, 7), "tof")
-    before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
-    with pytest.raises(CalibrationFileError, match="camera name"):
-        write_calibration(tmp_path, _result(K * 2), _views(4, 9), "bad name")
-    no_amplitude = [View(depth=np.ones((6, 8)))]
-    with pytest.raises(CalibrationFileError, match="no amplitude"):
-        write_calibration(tmp_path, _result(K * 2), no_amplitude, "tof")
-    after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
-    assert after == before
-
-
-def test_write_calibration_cleans_up_after_a_kill_between_the_renames(tmp_path: Path) -> None:
-    write_calibration(tmp_path, _result(), _views(2, 7), "tof")
-    # what a SIGKILL between the two renames leaves: the old views moved aside, the new ones staged
-    (tmp_path / "views").rename(tmp_path / ".views.old.1.x")
-    save_views(tmp_path / ".views.new.1.x", _views(3, 9))
-    write_calibration(tmp_path, _result(), _views(4, 5), "tof")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "calibration.yaml", "views"]
-    assert len(load_views(tmp_path / "views")) == 4
 
 
 def test_saved_corners_round_trip_exactly_and_a_bad_file_is_named(tmp_path):

@@ -296,6 +296,19 @@ def test_bad_command_lines_exit_2(capsys, tmp_path):
             main(argv)
         assert exc.value.code == EXIT_USAGE
         capsys.readouterr()
+    # refused on the command line, before any frame is read, with the reason
+    for option, value, reason in (("--size", "2x5", "at least 3x3 interior corners"),
+                                  ("--size", "0x0", "at least 3x3 interior corners"),
+                                  ("--size", "1x1", "at least 3x3 interior corners"),
+                                  ("--slop", "-1", "must be at least 0, got -1"),
+                                  ("--depth-scale", "1e300", "must be at most 10, got 1e300"),
+                                  ("--square", "30", "must be at most 10, got 30"),
+                                  ("--depth-bias", "offset+wiggle", "depth_bias must be 'none' or terms")):
+        argv = ["bag", str(tmp_path / "never_read"), *BOARD, "--output", str(tmp_path / "o"), option, value]
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exc.value.code == EXIT_USAGE and reason in err and "Traceback" not in err, (option, value, err)
 
 
 def test_unreadable_input_exits_3(capsys, tmp_path):
@@ -348,7 +361,7 @@ def test_too_few_views_exit_6(capsys, tmp_path):
 
 
 def test_a_failed_quality_check_exits_7_and_leaves_the_earlier_calibration(bags, calibrated, capsys, tmp_path):
-    shutil.copytree(calibrated, tmp_path, dirs_exist_ok=True)
+    shutil.copytree(calibrated, tmp_path, dirs_exist_ok=True, symlinks=True)
     before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     # depth read in the wrong units (3 mm a count): no focal length and offset reconcile it
     code, out, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--depth-scale", "0.003")

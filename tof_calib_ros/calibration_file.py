@@ -11,7 +11,6 @@ import math
 import os
 import re
 import secrets
-import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -116,10 +115,10 @@ def _intrinsics(source: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
 
 def write_camera_yaml(path: str | os.PathLike, source: Any, camera_name: str) -> Path:
     """Write K and D (from a CalibrationResult, or a mapping with K, D, image_size) for ROS."""
-    return atomic_write(path, _camera_yaml(source, camera_name))
+    return atomic_write(path, camera_yaml(source, camera_name))
 
 
-def _camera_yaml(source: Any, camera_name: str) -> bytes:
+def camera_yaml(source: Any, camera_name: str) -> bytes:
     """A monocular camera has R = identity and P = [K | 0]. Floats are written in full (repr),
     so reading the file back gives the same numbers bit for bit."""
     if not isinstance(camera_name, str) or not _CAMERA_NAME.fullmatch(camera_name):
@@ -144,11 +143,11 @@ def _camera_yaml(source: Any, camera_name: str) -> bytes:
 def _number(value: Any, where: str) -> float:
     # yaml-cpp writes 1e-05 where YAML 1.1 (PyYAML) wants 1.0e-05, so numbers may come as text
     if isinstance(value, bool):
-        raise CalibrationFileError(f"{where}: expected a number, got {value!r}")
+        raise CalibrationFileError(f"{where}: expected a number, got {_short(value)}")
     try:
         number = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise CalibrationFileError(f"{where}: expected a number, got {value!r}") from None
+        raise CalibrationFileError(f"{where}: expected a number, got {_short(value)}") from None
     if not math.isfinite(number):
         raise CalibrationFileError(f"{where}: {value!r} is not a finite number")
     return number
@@ -164,7 +163,7 @@ def _read_matrix(doc: dict, key: str, shape: tuple[int, int] | None, where: str)
     rows, cols, data = node["rows"], node["cols"], node["data"]
     if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (rows, cols)):
         raise CalibrationFileError(f"{where}: {key} rows and cols must be non-negative integers, "
-                                   f"got {rows!r} and {cols!r}")
+                                   f"got {_short(rows)} and {_short(cols)}")
     if shape is not None and (rows, cols) != shape:
         raise CalibrationFileError(f"{where}: {key} must be {shape[0]}x{shape[1]}, got {rows}x{cols}")
     if not isinstance(data, list) or len(data) != rows * cols:
@@ -176,6 +175,28 @@ def _read_matrix(doc: dict, key: str, shape: tuple[int, int] | None, where: str)
     return values.reshape(rows, cols) if values.size else values.reshape(0, 0)
 
 
+# A camera calibration file is about 1 kB: a thousand times that is not one.
+MAX_YAML_BYTES = 1 << 20
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """SafeLoader refusing aliases: a calibration file has none, and a few nested ones (a
+    "billion laughs" of 1 kB) expand to gigabytes before any check could see them."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(None, None, "aliases (*name) are not accepted in a calibration file",
+                                              event.start_mark)
+        return super().compose_node(parent, index)
+
+
+def _short(value: Any) -> str:
+    """A value for an error message, cut short: it may be a huge structure."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
     """Read a camera_calibration_parsers YAML file, refusing anything it would misread.
 
@@ -184,7 +205,12 @@ def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
     """
     where = str(path)
     try:
-        doc = yaml.safe_load(Path(path).read_text())
+        with open(path, "rb") as f:
+            raw = f.read(MAX_YAML_BYTES + 1)
+        if len(raw) > MAX_YAML_BYTES:
+            raise CalibrationFileError(f"{where}: larger than {MAX_YAML_BYTES // 1024} kB; a camera calibration "
+                                       "file is about 1 kB")
+        doc = yaml.load(raw.decode(), Loader=_NoAliasLoader)   # noqa: S506 - a SafeLoader without aliases
     except OSError as exc:
         raise CalibrationFileError(f"{where}: cannot read ({exc.strerror or exc})") from exc
     except yaml.YAMLError as exc:
@@ -199,14 +225,14 @@ def read_camera_yaml(path: str | os.PathLike) -> CameraYaml:
     for key in ("image_width", "image_height"):
         value = doc.get(key)
         if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
-            raise CalibrationFileError(f"{where}: {key} must be a positive integer, got {value!r}")
+            raise CalibrationFileError(f"{where}: {key} must be a positive integer, got {_short(value)}")
         if value > _MAX_SIZE:
             raise CalibrationFileError(f"{where}: {key} {value} is beyond what a CameraInfo holds (uint32)")
         size.append(value)
     name, model = doc.get("camera_name", "unknown"), doc.get("distortion_model", DISTORTION_MODEL)
     for key, value in (("camera_name", name), ("distortion_model", model)):
         if not isinstance(value, str):
-            raise CalibrationFileError(f"{where}: {key} must be text, got {value!r}")
+            raise CalibrationFileError(f"{where}: {key} must be text, got {_short(value)}")
     D = _read_matrix(doc, "distortion_coefficients", None, where)
     if D.shape[0] != 1 and D.size:
         raise CalibrationFileError(f"{where}: distortion_coefficients must be one row, got {D.shape[0]}")
@@ -363,38 +389,3 @@ def load_views(directory: str | os.PathLike) -> list[View]:
     if not views:
         raise CalibrationFileError(f"{directory}: no NNNN_ir.png views found")
     return views
-
-
-def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence[View] | EncodedViews,
-                      camera_name: str, extra: Mapping[str, Any] | None = None,
-                      depth_units: float | None = None) -> Path:
-    """Write ``views/``, ``calibration.json`` and ``calibration.yaml`` into ``directory``; returns the YAML.
-
-    The YAML goes last, so a driver reading it sees a new calibration only once the views and
-    the report behind it are complete, and everything that can be refused (a bad camera name,
-    a view without amplitude) is refused before the first file changes. ``views/`` is replaced
-    whole, not file by file, so no views of an earlier, larger set stay behind: the new set is
-    written beside it and swapped in by two renames; after a SIGKILL between those two, the
-    next write removes what is left.
-    """
-    out = Path(directory).expanduser()
-    camera_yaml = _camera_yaml(result, camera_name)
-    token = f"{os.getpid()}.{secrets.token_hex(4)}"
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        for stale in out.glob(".views.*"):
-            shutil.rmtree(stale, ignore_errors=True)
-        staging, current, retired = out / f".views.new.{token}", out / "views", out / f".views.old.{token}"
-        try:
-            save_views(staging, views, depth_units)
-        except BaseException:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise
-        if current.exists():
-            os.rename(current, retired)
-        os.rename(staging, current)
-        shutil.rmtree(retired, ignore_errors=True)
-    except OSError as exc:
-        raise CalibrationFileError(f"cannot write the views into {out}: {exc.strerror or exc}") from exc
-    write_json(out / "calibration.json", result, extra)
-    return atomic_write(out / "calibration.yaml", camera_yaml)

@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .calibration_file import CalibrationFileError, read_camera_yaml
+from .calibration_file import CalibrationFileError, CameraYaml, read_camera_yaml
 from .core import depth_bias as bias_model
 from .core.board import Board
 from .core.camera import depth_of, pack_intrinsics, transform
@@ -52,12 +52,32 @@ class Calibration:
         return self.depth_convention is not None
 
 
+def _refuse_unreadable_model(cam: CameraYaml, where: str) -> None:
+    """The check projects with plumb_bob and a K without skew; a file it would read otherwise
+    (another model, a K that is not a camera matrix) is refused, not half-read into a verdict."""
+    K = cam.K
+    problems = []
+    if cam.distortion_model not in ("plumb_bob", ""):
+        problems.append(f"distortion model {cam.distortion_model!r} (the check reads plumb_bob only)")
+    if cam.D.size > 5:
+        problems.append(f"{cam.D.size} distortion terms (plumb_bob has 5)")
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        problems.append(f"focal lengths fx={K[0, 0]:g}, fy={K[1, 1]:g} (must be positive)")
+    if K[0, 1] != 0:
+        problems.append(f"skew K[0][1]={K[0, 1]:g} (the camera model has none)")
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        problems.append(f"camera_matrix last rows {K[1].tolist()} {K[2].tolist()} (must be [0, fy, cy] [0, 0, 1])")
+    if problems:
+        raise CalibrationFileError(f"{where}: cannot be checked as it is: " + "; ".join(problems))
+
+
 def load_calibration(yaml_path: str | Path) -> Calibration:
     """Read a camera YAML and, when present, the depth model of calibration.json beside it."""
     yaml_path = Path(yaml_path)
     cam = read_camera_yaml(yaml_path)
+    _refuse_unreadable_model(cam, str(yaml_path))
     D = np.zeros(5)
-    D[:min(5, cam.D.size)] = cam.D[:5]
+    D[:cam.D.size] = cam.D
     bias, convention, source = np.zeros(bias_model.N_BIAS), None, str(yaml_path)
     sidecar = yaml_path.with_suffix(".json")
     if sidecar.is_file():

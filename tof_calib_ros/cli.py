@@ -13,6 +13,7 @@ with one line on stderr and an exit code (see ``tof_calib --help``).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import shutil
@@ -25,10 +26,13 @@ import numpy as np
 
 from . import Board, CalibrationError, calibrate
 from .bag_io import STORAGES, BagError, BagSource, TopicError
-from .calibration_file import CalibrationFileError, write_calibration, write_json
+from .calibration_file import CalibrationFileError, write_json
 from .check import check_views, load_calibration
 from .collector import AXES, CollectorConfig, ViewCollector
+from .core import depth_bias
+from .core.board import MAX_SQUARE_M, MIN_SQUARE_M
 from .image_folder import scan
+from .output_folder import write_calibration
 from .replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 
@@ -67,17 +71,33 @@ def _board_size(text: str) -> tuple[int, int]:
     match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not match:
         raise argparse.ArgumentTypeError(f"{text!r} is not COLSxROWS (interior corners, e.g. 5x7)")
-    return int(match[1]), int(match[2])
+    size = int(match[1]), int(match[2])
+    try:
+        Board(*size, 0.03)
+    except CalibrationError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return size
 
 
-def _positive(kind: type) -> Callable[[str], float]:
+def _depth_bias(text: str) -> str:
+    try:
+        depth_bias.parse(text)
+    except CalibrationError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def _positive(kind: type, low: float = 0.0, high: float = math.inf, inclusive: bool = False) -> Callable[[str], float]:
+    """A number above ``low`` (or at it, ``inclusive``) and at most ``high``."""
     def parse(text: str):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not value > 0:
-            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+        if not (value >= low if inclusive else value > low):
+            raise argparse.ArgumentTypeError(f"must be {'at least' if inclusive else 'above'} {low:g}, got {text}")
+        if not value <= high:
+            raise argparse.ArgumentTypeError(f"must be at most {high:g}, got {text}")
         return value
     return parse
 
@@ -240,12 +260,13 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
         print("wrote " + ", ".join(str(p) for p in written))
         raise Failure(EXIT_QUALITY, f"calibration not trusted, nothing in {out} changed: " + "; ".join(result.verdict))
     try:
-        yaml_path = write_calibration(out, result, views, args.camera_name, extra)
+        yaml_path = write_calibration(out, result, views, args.camera_name, extra, report=lambda path: _write_report(
+            path, views, board, result, args.depth_convention, source["path"]))
     except CalibrationFileError as exc:
         raise Failure(EXIT_ERROR, str(exc)) from None
-    report = _write_report(out / "report.html", views, board, result, args.depth_convention, source["path"])
     shutil.rmtree(rejected, ignore_errors=True)   # an earlier refusal's: this result replaces it
-    print(f"wrote {yaml_path}, {out / 'calibration.json'}, {out / 'views'}/, {report}")
+    print(f"wrote {yaml_path}, {out / 'calibration.json'}, {out / 'views'}/, {out / 'report.html'} "
+          f"(as one set: {out / 'current'})")
     return EXIT_OK
 
 
@@ -368,7 +389,8 @@ def _add_board(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument("--size", type=_board_size, metavar="COLSxROWS",
                    help="interior corners, as ROS camera_calibration counts them (e.g. 5x7)",
                    **(kw if required else {"default": (5, 7)}))
-    p.add_argument("--square", type=_positive(float), metavar="M", help="square size in metres",
+    p.add_argument("--square", type=_positive(float, MIN_SQUARE_M, MAX_SQUARE_M, inclusive=True), metavar="M",
+                   help="square size in metres",
                    **(kw if required else {"default": 0.03}))
 
 
@@ -377,7 +399,7 @@ def _add_collection(p: argparse.ArgumentParser, convention_default: str | None =
                    help="depth along the optical axis (z, REP 118, Kinect) or from the optical centre "
                         "(radial, raw PMD)" + ("" if convention_default else
                                                "; default: the calibration.json's, else z"))
-    p.add_argument("--depth-scale", type=_positive(float), default=DEPTH_SCALE, metavar="M",
+    p.add_argument("--depth-scale", type=_positive(float, 1e-6, 10.0, inclusive=True), default=DEPTH_SCALE, metavar="M",
                    help=f"metres per count of integer depth (default {DEPTH_SCALE}: millimetres)")
     p.add_argument("--views-min", type=int, default=VIEWS_MIN, metavar="N",
                    help=f"views needed to calibrate (default {VIEWS_MIN}, as the node)")
@@ -398,7 +420,7 @@ def _add_topics(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth-topic", metavar="T", help="default: the Image topic named depth")
     p.add_argument("--camera-info-topic", metavar="T", help="default: the CameraInfo topic (used for the image "
                                                             "size and compared with the result)")
-    p.add_argument("--slop", type=float, default=SLOP_S, metavar="S",
+    p.add_argument("--slop", type=_positive(float, 0.0, 1.0, inclusive=True), default=SLOP_S, metavar="S",
                    help=f"largest stamp difference of a paired amplitude and depth frame (default {SLOP_S} s)")
 
 
@@ -406,7 +428,7 @@ def _add_calibration(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", required=True, type=Path, metavar="DIR",
                    help="where calibration.yaml, calibration.json, views/ and report.html go (for a refused "
                         "calibration: its report and figures in DIR/rejected/, nothing else changed)")
-    p.add_argument("--depth-bias", default="offset", metavar="TERMS",
+    p.add_argument("--depth-bias", type=_depth_bias, default="offset", metavar="TERMS",
                    help="depth error terms estimated alongside: none, or offset, scale, tilt joined by + "
                         "(default offset; offset+tilt for drivers that compute z-depth, e.g. Kinect v2)")
     p.add_argument("--camera-name", type=_camera_name, default=CAMERA_NAME,
