@@ -3,6 +3,12 @@ decoders fed garbage.
 
     python benchmarks/reliability.py [--minutes 10] [--seed 0] [--json PATH]
 
+Faults: each kind of fault an adversarial run found in the offline tool and the files, tried
+again (``faults``): writes killed at every rename, out of file-size quota, two writers, bad
+command lines, hostile files among good stills, calibration files the check would misread,
+an MCAP recording cut off at ten places. Counted per kind: inputs tried, refused with a
+message, worked, tracebacks, data lost.
+
 Soak: the simulated camera streams at 30 Hz into the calibration node for ``--minutes`` while
 this script calls ~/calibrate, ~/reset and ~/commit at random (sometimes two at once) and
 publishes bursts of malformed frames of every kind on the same topics. Counted: frames offered,
@@ -22,6 +28,7 @@ import hashlib
 import json
 import os
 import random
+import re
 import tempfile
 import threading
 import time
@@ -32,6 +39,7 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
 NS = "/soak"
+HANG_TIMEOUT_S = 10.0   # the node's calibration.timeout in the soak, which stops its worker once
 MALFORMED = ("rgb8 encoding", "unknown encoding", "data shorter than step x height", "step less than a row",
              "mono8 depth", "depth of another size", "NaN float amplitude", "zero-size image")
 
@@ -64,15 +72,16 @@ def _malformed(kind: str, stamp: float):
 
 
 def _digest(out: Path) -> str:
-    """The published files (not the node's hidden staging folders). A file may vanish while the
-    node swaps views/ in (two renames): then the digest is taken again."""
+    """The current calibration set's files (the generation ``current`` points to, resolved once:
+    a new set may be made current meanwhile, and the one before it is kept)."""
     while True:
         h = hashlib.sha256()
         try:
-            for path in sorted(out.rglob("*")):
-                if path.is_file() and not any(part.startswith(".") for part in path.relative_to(out).parts):
+            generation = Path(os.path.realpath(out / "current"))
+            for path in sorted(generation.rglob("*")):
+                if path.is_file():
                     h.update(path.name.encode() + path.read_bytes())
-        except FileNotFoundError:
+        except FileNotFoundError:   # that generation went two switches ago: take the new one
             continue
         return h.hexdigest()
 
@@ -87,6 +96,17 @@ def _files_whole(out: Path) -> bool:
     except (CalibrationFileError, OSError, ValueError):
         return False
     return bool(np.all(np.isfinite(K)) and doc["verdict"]["ok"])
+
+
+def _answered(client, timeout: float) -> bool:
+    from std_srvs.srv import Trigger
+
+    future, done = client.call_async(Trigger.Request()), threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+    if done.wait(timeout):
+        return True
+    client.remove_pending_request(future)
+    return False
 
 
 def soak(minutes: float, seed: int = 0, log=print) -> dict:
@@ -107,7 +127,8 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     sim = NodeProcess("tof_sim_node", ["-r", f"__ns:={NS}", *board, "-p", "rate:=30.0", "-p", f"seed:={seed}",
                                        "-p", f"calibration_file:={work / 'driver.yaml'}"], work, env)
     node = NodeProcess("calibration_node", ["-r", f"__ns:={NS}", *board, "-p", "views.min:=8",
-                                            "-p", "views.max:=30", "-p", f"output_dir:={out}"], work, env)
+                                            "-p", "views.max:=30", "-p", f"output_dir:={out}",
+                                            "-p", f"calibration.timeout:={HANG_TIMEOUT_S}"], work, env)
     procs = (sim, node)
     spinner = Spinner(context, "soak")
     calls = {s: {"made": 0, "answered": 0, "succeeded": 0} for s in ("calibrate", "reset", "commit")}
@@ -126,6 +147,11 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     amplitude_pub = spinner.node.create_publisher(Image, f"{NS}/amplitude", qos_profile_sensor_data)
     depth_pub = spinner.node.create_publisher(Image, f"{NS}/depth", qos_profile_sensor_data)
     clients = {s: spinner.client(Trigger, f"{NS}/calibration_node/{s}") for s in calls}
+    # a burst comes from three more clients, each with room for its 100 answers
+    deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    burst_clients = [spinner.node.create_client(Trigger, f"{NS}/calibration_node/calibrate", qos_profile=deep)
+                     for _ in range(3)]
+    events = {"burst of 300 calls sent": False, "calibration worker stopped (SIGSTOP)": False}
     try:
         # One answered call per client first, not counted: a client's first answers can be lost
         # to discovery (Spinner.call), which is Fast DDS's, not the node's. Right after a reset
@@ -135,12 +161,15 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         # the launcher execs Python, so the pid is the node's own process
         wait_until(lambda: amplitude_pub.get_subscription_count() > 0, 30.0, "the node's subscriptions", *procs)
 
-        def call(service: str) -> threading.Event:
+        for client in burst_clients:   # answered once each first, as above
+            wait_until(lambda c=client: _answered(c, 5.0), 60.0, "a burst client's first answer", *procs)
+
+        def call(service: str, client=None) -> threading.Event:
             """Send one call; the returned event is set when it is answered and checked."""
             calls[service]["made"] += 1
             before = _digest(out) if out.exists() else ""
             done, t0 = threading.Event(), time.monotonic()
-            future = clients[service].call_async(Trigger.Request())
+            future = (client or clients[service]).call_async(Trigger.Request())
 
             def answered(_f) -> None:
                 resp = future.result()
@@ -177,6 +206,17 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
                     depth_pub.publish(d)
                     injected[kind] += 1
                 next_burst = now + rnd.uniform(3.0, 8.0)
+            if not events["burst of 300 calls sent"] and now > end - minutes * 40.0:   # a third of the way
+                pending.extend(call("calibrate", c) for c in burst_clients for _ in range(100))
+                events["burst of 300 calls sent"] = True
+            if not events["calibration worker stopped (SIGSTOP)"] and now > end - minutes * 20.0:
+                # a stuck worker: the next calibration must time out and the node replace it
+                import psutil
+
+                for p in psutil.Process(node.proc.pid).children(recursive=True):
+                    if not p.children() and "resource_tracker" not in " ".join(p.cmdline()):
+                        p.suspend()
+                events["calibration worker stopped (SIGSTOP)"] = True
             service = rnd.choices(["calibrate", "reset", "commit"], weights=[5, 1, 2])[0]
             pending.append(call(service))
             if service == "calibrate" and rnd.random() < 0.2:
@@ -206,7 +246,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         "calls": calls, "calls made": made, "calls answered": answered,
         "answer latency s (median, max)": [float(np.median(latencies)) if latencies else None,
                                            float(np.max(latencies)) if latencies else None],
-        "camera_info": infos, "files": damage, "node alive at the end": alive,
+        "camera_info": infos, "files": damage, "node alive at the end": alive, "events": events,
         "rss MB (first, after views full, end)": [float(rss[0]), float(half[0]), float(rss[-1])] if len(rss) else [],
         "rss slope after views full, MB/min": slope,
         "data lost": (made - answered) + sum(damage.values()) + infos["with_nan"] + int(not alive),
@@ -276,32 +316,251 @@ def fuzz(n: int, seed: int = 0) -> dict:
     return outcome
 
 
+# -- faults of the offline tool and the files: each kind tried, what it gave --------------------------------
+_WRITE = """
+import os, signal, sys
+import numpy as np
+from tof_calib_ros import View
+from tof_calib_ros.core.result import CalibrationResult, ViewReport
+from tof_calib_ros.output_folder import write_calibration
+out, scale, n, kill_at, repeat = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+calls = [0]
+def killing(real):
+    def call(*a, **k):
+        calls[0] += 1
+        if calls[0] == kill_at:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(*a, **k)
+    return call
+os.rename, os.replace = killing(os.rename), killing(os.replace)
+K = np.array([[500.0 * scale, 0, 320], [0, 500.0 * scale, 240], [0, 0, 1]])
+view = ViewReport(index=0, rvec=np.zeros(3), tvec=np.array([0, 0, 1.0]), pixel_rms=0.2, depth_rms=0.001,
+                  pixel_residuals=np.zeros((4, 2)), depth_residuals=np.zeros(4))
+result = CalibrationResult(method="depth", image_size=(640, 480), depth_convention="z", K=K, D=np.zeros(5),
+                           depth_bias=np.zeros(4), std={"fx": 0.5, "fy": 0.5, "cx": 1.0, "cy": 1.0}, views=[view])
+views = [View(depth=np.full((48, 64), 1000 + i, np.uint16), amplitude=np.full((48, 64), 7, np.uint16))
+         for i in range(n)]
+for _ in range(repeat):
+    write_calibration(out, result, views, "tof", {"n_views": n, "pad": "x" * int(sys.argv[6])})
+"""
+
+
+def _set_seen(out: Path) -> tuple[float, int] | None:
+    """fx and view count of the set a reader sees, or None when its files do not belong together."""
+    from tof_calib_ros.calibration_file import read_camera_yaml
+
+    gen = Path(os.path.realpath(out / "current"))
+    try:
+        fx = read_camera_yaml(gen / "calibration.yaml").K[0, 0]
+        doc = json.loads((gen / "calibration.json").read_text())
+        n = len(list((gen / "views").glob("*_ir.png")))
+    except Exception:  # noqa: BLE001 - anything unreadable is a damaged set
+        return None
+    return (fx, n) if doc["camera_matrix"][0][0] == fx and doc["n_views"] == n else None
+
+
+def _writer(out: Path, scale: float, n: int, kill_at: int = 0, repeat: int = 1, pad: int = 0,
+            fsize: int | None = None, wait: bool = True):
+    import resource
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        if fsize is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+
+    args = [sys.executable, "-c", _WRITE, str(out), str(scale), str(n), str(kill_at), str(repeat), str(pad)]
+    proc = subprocess.Popen(args, stderr=subprocess.PIPE, text=True, preexec_fn=limit)
+    if wait:
+        proc.err = proc.communicate(timeout=300)[1]
+    return proc
+
+
+def _cli(*argv: str, timeout: float = 600.0) -> tuple[int, str, float]:
+    import subprocess
+    import sys
+
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "tof_calib_ros.cli", *map(str, argv)], capture_output=True,
+                          text=True, timeout=timeout)
+    return proc.returncode, proc.stdout + proc.stderr, time.monotonic() - t0
+
+
+def faults(log=print) -> dict:
+    """Each kind of fault the adversarial run of issue 13 found, tried again: how many inputs, how
+    many ended in a one-line refusal or worked, tracebacks, and data lost (a reader seeing a mixed
+    or damaged calibration set, a good set changed by a failed run, a frame lost that was readable)."""
+    from tof_calib_ros import Board, sim
+    from tof_calib_ros.bag_io import BagWriter
+    from tof_calib_ros.calibration_file import save_views
+    from tof_calib_ros.core.pipeline import View
+
+    rows: dict[str, dict] = {}
+    work = Path(tempfile.mkdtemp(prefix="tof_calib_faults_"))
+
+    def row(kind: str, tried: int, refused: int, worked: int, tracebacks: int, lost: int, note: str = "") -> None:
+        rows[kind] = {"tried": tried, "refused with a message": refused, "worked": worked,
+                      "tracebacks": tracebacks, "data lost": lost, "note": note}
+        log(f"{kind}: {rows[kind]}")
+
+    old, new = (500.0, 5), (1000.0, 3)
+    # a write killed at every rename, in turn, until one runs through
+    seen, lost, kills = [], 0, 0
+    for n in range(1, 80):
+        out = work / f"kill{n}"
+        _writer(out, 1, 5)
+        proc = _writer(out, 2, 3, kill_at=n)
+        seen.append(_set_seen(out))
+        lost += int(seen[-1] not in (old, new))
+        if proc.returncode == 0:
+            break
+        kills += 1
+    row("calibration write killed at a rename", kills + 1, 0, kills + 1, 0, lost,
+        f"killed at each of {kills} renames: the old set {seen.count(old)} times, the new {seen.count(new)}")
+    # out of file-size quota (ulimit -f) at several sizes
+    tried = lost = refused = tracebacks = 0
+    for fsize in (2_000, 20_000, 60_000, 150_000):
+        out = work / f"quota{fsize}"
+        _writer(out, 1, 5)
+        proc = _writer(out, 2, 3, pad=200_000, fsize=fsize)
+        tried += 1
+        refused += int(proc.returncode != 0 and "File too large" in proc.err)
+        tracebacks += int("Traceback" in proc.err and "CalibrationFileError" not in proc.err)
+        lost += int(_set_seen(out) != old)
+    row("calibration write out of file-size quota", tried, refused, 0, tracebacks, lost)
+    # two writers at once, a reader beside them
+    out = work / "two"
+    _writer(out, 1, 5)
+    writers = [_writer(out, scale, int(scale) + 1, repeat=15, wait=False) for scale in (2, 3)]
+    mixed = reads = 0
+    while any(w.poll() is None for w in writers):
+        reads += 1
+        mixed += int(_set_seen(out) is None and (out / "current").exists())
+    errors = [w.communicate()[1] for w in writers]
+    row("two writers on one output folder", 30, 0, sum(w.returncode == 0 for w in writers) * 15,
+        sum("Traceback" in e for e in errors), mixed + int(_set_seen(out) is None),
+        f"{reads} reads while they wrote, {mixed} saw a mixed set")
+
+    # bad command lines: exit 2 before any frame is read
+    board = ["--size", "5x7", "--square", "0.03"]
+    bad = [["--size", "2x5"], ["--size", "0x0"], ["--size", "1x1"], ["--slop", "-1"], ["--depth-scale", "1e300"],
+           ["--depth-bias", "offset+wiggle"], ["--square", "30"]]
+    results = [_cli("bag", work / "never_read", *board, "--output", work / "o", *b) for b in bad]
+    row("bad command line values", len(bad), sum(code == 2 for code, _, _ in results), 0,
+        sum("Traceback" in text for _, text, _ in results), 0)
+
+    # a folder of good stills with hostile files among them
+    cam, b = sim.pmd_camera(), Board(5, 7, 0.03)
+    folder = work / "stills"
+    views = []
+    for i, (rvec, tvec) in enumerate(sim.random_poses(cam, b, 16, 7, distance=(0.4, 1.0))):
+        f = sim.render(cam, b, rvec, tvec, noise=sim.Noise(depth=0.002, amplitude=0.002), rng=i)
+        views.append(View(f.depth, amplitude=f.amplitude))
+    save_views(folder, views)
+    with open(folder / "0100_ir.npy", "wb") as f:   # a header claiming 10^6 x 10^6
+        np.lib.format.write_array_header_1_0(f, {"descr": "<u2", "fortran_order": False, "shape": (10**6, 10**6)})
+    np.save(folder / "0100_depth.npy", np.ones((200, 200), np.uint16))
+    import cv2
+    big = cv2.imencode(".png", np.zeros((20000, 20000), np.uint8))[1].tobytes()   # about 400 kB
+    (folder / "0101_ir.png").write_bytes(big)
+    (folder / "0101_depth.png").write_bytes(big)
+    np.save(folder / "0102_ir.npy", views[0].amplitude)
+    np.save(folder / "0102_depth.npy", np.full((200, 200), 1e300))   # float64 depth beyond any range
+    code, text, seconds = _cli("images", folder, *board, "--output", work / "stills_out")
+    skipped = re.search(r"(\d+) too_large", text)
+    too_large = int(skipped[1]) if skipped else 0
+    used = re.search(r"calibration \((\d+) of (\d+) views", text)
+    row("hostile files among 16 stills", 3, too_large, int(code == 0), int("Traceback" in text), int(code != 0),
+        f"exit {code} in {seconds:.1f} s; {too_large} pairs too large skipped, the 1e300 depth read as invalid; "
+        f"views used: {used[1] if used else 0} of {used[2] if used else 0}")
+
+    # calibration files the check would misread, and a YAML alias bomb
+    good = ("image_width: 200\nimage_height: 200\ncamera_name: tof\n"
+            "camera_matrix: {rows: 3, cols: 3, data: [284.4, 0.0, 100.0, 0.0, 284.4, 100.0, 0.0, 0.0, 1.0]}\n"
+            "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [-0.1, 0.02, 0, 0, 0]}\n"
+            "rectification_matrix: {rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}\n"
+            "projection_matrix: {rows: 3, cols: 4, data: [284.4, 0, 100, 0, 0, 284.4, 100, 0, 0, 0, 1, 0]}\n")
+    edits = [("[284.4, 0.0, 100.0, 0.0, 284.4", "[-284.4, 0.0, 100.0, 0.0, 284.4"),
+             ("0.0, 0.0, 1.0]}", "0.0, 0.0, 0.0]}"), ("0.0, 0.0, 1.0]}", "0.0, 0.0, 2.0]}"),
+             ("[284.4, 0.0, 100.0, 0.0, 284.4", "[284.4, 150.0, 100.0, 0.0, 284.4"),
+             ("plumb_bob", "equidistant"),
+             ("plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [-0.1, 0.02, 0, 0, 0]}",
+              "rational_polynomial\ndistortion_coefficients: {rows: 1, cols: 8, data: [0, 0, 0, 0, 0, 0, 0, 0]}")]
+    anchors = "a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n" + "".join(
+        f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]\n" for i in range(1, 9))
+    files = [good.replace(a, z, 1) for a, z in edits] + [anchors + good.replace("data: [-0.1, 0.02, 0, 0, 0]",
+                                                                                 "data: *a8")]
+    results = []
+    for i, text in enumerate(files):
+        path = work / f"misread{i}.yaml"
+        path.write_text(text)
+        results.append(_cli("check", path, folder, *board, timeout=60))
+    row("calibration files check would misread (and an alias bomb)", len(files),
+        sum(code == 1 and ("cannot be checked" in t or "aliases" in t) for code, t, _ in results),
+        sum(code == 0 for code, _, _ in results), sum("Traceback" in t for _, t, _ in results),
+        sum(code == 0 for code, _, _ in results), f"slowest {max(s for _, _, s in results):.1f} s")
+
+    # an MCAP recording cut off at ten places (a recorder killed): frames before the cut
+    bag = work / "rec"
+    with BagWriter(bag, "mcap") as w:
+        for i, view in enumerate(v for v in views for _ in range(3)):   # each pose held for 3 frames
+            stamp = 100.0 + 0.1 * i
+            w.write("/tof/amplitude/image_raw", w.image_message(view.amplitude, "mono16", stamp, "tof"), stamp)
+            w.write("/tof/depth/image_raw", w.image_message(np.rint(view.depth * 1000).astype(np.uint16), "16UC1",
+                                                            stamp, "tof"), stamp)
+    mcap = next(bag.glob("*.mcap"))
+    whole = mcap.read_bytes()
+    (bag / "metadata.yaml").unlink()   # killed before it closed the bag
+    recovered, results = [], []
+    for fraction in np.linspace(0.1, 0.95, 10):
+        mcap.write_bytes(whole[:int(len(whole) * fraction)])
+        code, text, _ = _cli("bag", bag, *board, "--output", work / "cut_out", "--views-min", "3")
+        results.append((code, text))
+        judged = [int(line.split()[1]) for line in text.splitlines() if line.startswith("frames:")]
+        recovered.append(judged[0] if judged else 0)
+    row("MCAP recording cut off (no summary, no metadata.yaml)", 10,
+        sum(code != 0 for code, _ in results), sum(code == 0 for code, _ in results),
+        sum("Traceback" in t for _, t in results), int(recovered != sorted(recovered) or recovered[-1] < 40),
+        f"frame pairs read at 10 % to 95 % of the file: {recovered} of {len(views) * 3}")
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--minutes", type=float, default=10.0, help="length of the node's soak (0: none)")
+    ap.add_argument("--no-faults", action="store_true", help="skip the offline tool's and the files' faults")
     ap.add_argument("--fuzz", type=int, default=5000, help="random inputs per kind")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=RESULTS / "reliability.json")
     args = ap.parse_args()
+    faulted = {} if args.no_faults else faults(log=lambda s: None)
+    print(f"{'fault':<58}{'tried':>6}{'refused':>8}{'worked':>7}{'tracebacks':>11}{'lost':>5}")
+    for kind, r in faulted.items():
+        print(f"{kind:<58}{r['tried']:>6}{r['refused with a message']:>8}{r['worked']:>7}{r['tracebacks']:>11}"
+              f"{r['data lost']:>5}  {r['note']}")
     fuzzed = fuzz(args.fuzz, args.seed)
     print(f"{'fuzzed input':<22}{'tried':>8}{'worked':>8}{'clear error':>13}{'other':>7}")
     for kind, c in fuzzed.items():
         print(f"{kind:<22}{sum(c.values()):>8}{c['worked']:>8}{c['clear error']:>13}{c['other exception']:>7}")
-    print(f"\nsoak: {args.minutes:g} min of 30 Hz frames, random calibrate/reset/commit, malformed bursts ...",
-          flush=True)
-    soaked = soak(args.minutes, args.seed)
-    print(f"{'malformed kind':<34}{'injected':>9}")
-    for kind, n in soaked["malformed injected"].items():
-        print(f"{kind:<34}{n:>9}")
-    print(f"\n{'service':<12}{'made':>6}{'answered':>10}{'succeeded':>11}")
-    for s, c in soaked["calls"].items():
-        print(f"{s:<12}{c['made']:>6}{c['answered']:>10}{c['succeeded']:>11}")
-    for key in ("answer latency s (median, max)", "camera_info", "files", "node alive at the end",
-                "rss MB (first, after views full, end)", "rss slope after views full, MB/min", "data lost"):
-        print(f"{key}: {soaked[key]}")
+    soaked = {"data lost": 0}
+    if args.minutes > 0:
+        print(f"\nsoak: {args.minutes:g} min of 30 Hz frames, random calibrate/reset/commit, malformed bursts ...",
+              flush=True)
+        soaked = soak(args.minutes, args.seed)
+        print(f"{'malformed kind':<34}{'injected':>9}")
+        for kind, n in soaked["malformed injected"].items():
+            print(f"{kind:<34}{n:>9}")
+        print(f"\n{'service':<12}{'made':>6}{'answered':>10}{'succeeded':>11}")
+        for s, c in soaked["calls"].items():
+            print(f"{s:<12}{c['made']:>6}{c['answered']:>10}{c['succeeded']:>11}")
+        for key in ("events", "answer latency s (median, max)", "camera_info", "files", "node alive at the end",
+                    "rss MB (first, after views full, end)", "rss slope after views full, MB/min", "data lost"):
+            print(f"{key}: {soaked[key]}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"fuzz": fuzzed, "soak": soaked, "load": os.getloadavg()}, indent=2))
-    bad = soaked["data lost"] + sum(c["other exception"] for c in fuzzed.values())
+    args.json.write_text(json.dumps({"faults": faulted, "fuzz": fuzzed, "soak": soaked, "load": os.getloadavg()},
+                                    indent=2))
+    bad = soaked["data lost"] + sum(c["other exception"] for c in fuzzed.values()) + sum(
+        r["data lost"] + r["tracebacks"] for r in faulted.values())
     return 0 if bad == 0 else 1
 
 

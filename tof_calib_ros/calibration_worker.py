@@ -53,15 +53,27 @@ class CalibrationWorker:
         self._pool = ProcessPoolExecutor(1, mp_context=worker_context(), initializer=_init, initargs=(os.getpid(),))
         self._pool.submit(_ready)
 
-    def calibrate(self, *args: Any, **kwargs: Any) -> CalibrationResult:
-        """``tof_calib_ros.calibrate`` in the worker; raises what it raises."""
+    def calibrate(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> CalibrationResult:
+        """``tof_calib_ros.calibrate`` in the worker; raises what it raises. A worker that has
+        not answered in ``timeout`` seconds (stopped, or stuck) is killed and replaced."""
         try:
-            return self._pool.submit(calibrate, *args, **kwargs).result()
+            return self._pool.submit(calibrate, *args, **kwargs).result(timeout=timeout)
         except BrokenProcessPool:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._start()
+            self._restart()
             raise CalibrationError("the calibration's worker process ended (killed, or a crash in a numerical "
                                    "library); a new one is started: call again") from None
+        except TimeoutError:
+            self._restart(kill=True)
+            raise CalibrationError(f"the calibration's worker process did not answer in {timeout:g} s (stopped "
+                                   "or stuck; calibration.timeout); it was killed and a new one started: "
+                                   "call again") from None
+
+    def _restart(self, kill: bool = False) -> None:
+        if kill:
+            for process in list(self._pool._processes.values()):   # noqa: SLF001 - no public way to kill it
+                process.kill()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._start()
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

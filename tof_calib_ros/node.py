@@ -46,10 +46,11 @@ from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagSource
-from .calibration_file import EncodedViews, encode_views, write_calibration
+from .calibration_file import EncodedViews, encode_views
 from .calibration_worker import CalibrationWorker
 from .collector import CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
+from .output_folder import write_calibration
 from .replay import FrameError, Skip, decode_sized
 from .stamp_sync import StampSync
 from .tracking import BoardTracker
@@ -59,6 +60,10 @@ COMMIT_TIMEOUT_S = 5.0
 BAG_FLAGS = {"amplitude": "parameter bag.amplitude_topic", "depth": "parameter bag.depth_topic",
              "camera_info": "tof_calib bag --camera-info-topic (the node takes the bag's only one)"}
 WARN_PERIOD_S = 5.0
+# Requests wait here while the executor's threads are busy: with the default depth of 10, a burst
+# of calls (300 from 3 clients) lost half of them unanswered. Each one is answered, at worst with
+# "already running".
+SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 # Pairs waiting for the view worker. A search of the whole image for a lost board takes up to a
 # quarter of a second at 640x576 (8 frames at 30 Hz) where following it takes 1 ms: the queue
 # rides out those, and bounds the lag and the memory (12 MB of 640x576 16-bit pairs) when the
@@ -80,8 +85,8 @@ def _descriptor(text: str, read_only: bool = False, ints: tuple[int, int] | None
 
 # name: (default, descriptor). Board and QoS changes need a restart: they are read-only.
 PARAMETERS = {
-    "board.cols": (5, _descriptor("interior corners per row (as camera_calibration counts them)", True, (2, 100))),
-    "board.rows": (7, _descriptor("interior corners per column", True, (2, 100))),
+    "board.cols": (5, _descriptor("interior corners per row (as camera_calibration counts them)", True, (3, 100))),
+    "board.rows": (7, _descriptor("interior corners per column", True, (3, 100))),
     "board.square": (0.03, _descriptor("square size, metres", True, floats=(0.001, 1.0))),
     "depth.convention": ("z", _descriptor("'z' (REP 118, along the optical axis) or 'radial' (raw PMD)")),
     "depth.scale": (0.001, _descriptor("metres per unit of 16UC1 depth (0.001: millimetres)",
@@ -96,6 +101,9 @@ PARAMETERS = {
     "motion.max_blur_px": (CollectorConfig.max_blur_px, _descriptor(
         "a frame whose board moved farther than this while it was exposed is not a view, px", True,
         floats=(0.1, 100.0))),
+    "calibration.timeout": (120.0, _descriptor(
+        "seconds a calibration may take before its worker process is taken for stuck, killed and replaced",
+        floats=(1.0, 3600.0))),
     "camera_name": ("tof_camera", _descriptor("camera_name written into the calibration file")),
     "output_dir": ("~/.ros/tof_calib", _descriptor("where calibration.yaml, calibration.json and views/ go")),
     "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",
@@ -109,16 +117,23 @@ PARAMETERS = {
 
 
 class _RateLimitedLog:
-    """One warning per distinct message per period: a bad stream must not flood the log."""
+    """One warning per kind of problem per period, saying how many like it were held back: a
+    bad stream must not flood the log, and frames that each fail differently (their sizes, their
+    stamps) are one problem. The kinds are the node's own few, so memory stays bounded."""
 
     def __init__(self, logger, period: float):
-        self._logger, self._period, self._last = logger, period, {}
+        self._logger, self._period = logger, period
+        self._last: dict[str, float] = {}
+        self._held: dict[str, int] = {}
 
-    def warn(self, text: str) -> None:
+    def warn(self, kind: str, text: str) -> None:
         now = time.monotonic()
-        if now - self._last.get(text, -1e9) >= self._period:
-            self._last[text] = now
-            self._logger.warning(text)
+        if now - self._last.get(kind, -1e9) < self._period:
+            self._held[kind] = self._held.get(kind, 0) + 1
+            return
+        held = self._held.pop(kind, 0)
+        self._last[kind] = now
+        self._logger.warning(text + (f" ({held} more like it in the last {self._period:g} s)" if held else ""))
 
 
 class _Executor(MultiThreadedExecutor):
@@ -196,9 +211,9 @@ class CalibrationNode(Node):
         self.info_pub = self.create_publisher(CameraInfo, "~/camera_info", latched)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         services = ReentrantCallbackGroup()
-        self.create_service(Trigger, "~/calibrate", self._on_calibrate, callback_group=services)
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
-        self.create_service(Trigger, "~/commit", self._on_commit, callback_group=services)
+        for name, callback in (("~/calibrate", self._on_calibrate), ("~/reset", self._on_reset),
+                               ("~/commit", self._on_commit)):
+            self.create_service(Trigger, name, callback, qos_profile=SERVICE_QOS, callback_group=services)
         self.driver = self.create_client(SetCameraInfo, p("set_camera_info_service"), callback_group=services)
         self.create_timer(1.0, self._publish_diagnostics, callback_group=topics)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -284,22 +299,22 @@ class CalibrationNode(Node):
             try:
                 self._collect(amplitude_msg, depth_msg, generation, idle)
             except Exception as exc:  # noqa: BLE001 - a bad frame must never end the worker
-                self._problem(f"frame skipped: {exc}")
+                self._problem("internal", f"frame skipped: {exc}")
 
     def _collect(self, amplitude_msg: Image, depth_msg: Image, generation: int, thorough: bool) -> None:
         try:
             amplitude = decode_image(amplitude_msg)
             depth = depth_to_metres(decode_image(depth_msg), depth_msg.encoding, self._param("depth.scale"))
         except ImageError as exc:
-            self._problem(f"frame skipped: {exc}")
+            self._problem("decode", f"frame skipped: {exc}")
             return
         if amplitude.shape != depth.shape:
-            self._problem(f"frame skipped: amplitude {amplitude.shape[1]}x{amplitude.shape[0]} and depth "
+            self._problem("size", f"frame skipped: amplitude {amplitude.shape[1]}x{amplitude.shape[0]} and depth "
                           f"{depth.shape[1]}x{depth.shape[0]} differ in size")
             return
         info = self.driver_info
         if info is not None and (info.width, info.height) not in ((0, 0), (depth.shape[1], depth.shape[0])):
-            self._problem(f"frame skipped: images are {depth.shape[1]}x{depth.shape[0]} but camera_info says "
+            self._problem("size", f"frame skipped: images are {depth.shape[1]}x{depth.shape[0]} but camera_info says "
                           f"{info.width}x{info.height}")
             return
         self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
@@ -342,23 +357,23 @@ class CalibrationNode(Node):
                         return
                     if isinstance(item, Skip):
                         skipped += 1
-                        self._problem(f"message skipped ({item.kind}): {item.where}: {item.reason}")
+                        self._problem(item.kind, f"message skipped ({item.kind}): {item.where}: {item.reason}")
                         continue
                     try:
                         amplitude, depth = decode_sized(item, size)
                     except (FrameError, ImageError) as exc:
                         skipped += 1
-                        self._problem(f"frame skipped: {item.where}: {exc}")
+                        self._problem(getattr(exc, "kind", "decode"), f"frame skipped: {item.where}: {exc}")
                         continue
                     self.frame_id = item.depth.frame_id or item.amplitude.frame_id
                     frames += 1
                     self._judge(amplitude, depth, item.stamp, self._generation, thorough=True)
         except BagError as exc:
-            self._problem(f"cannot replay the bag: {exc}")
+            self._problem("replay", f"cannot replay the bag: {exc}")
             log.error(f"cannot replay the bag: {exc}")
             return
         except Exception as exc:  # noqa: BLE001 - a damaged bag must not end the node
-            self._problem(f"bag replay stopped: {exc!r}")
+            self._problem("replay", f"bag replay stopped: {exc!r}")
             log.error(f"bag replay stopped: {exc!r}\n{traceback.format_exc()}")
             return
         with self._lock:
@@ -367,9 +382,9 @@ class CalibrationNode(Node):
         success, message = self._calibrate()
         (log.info if success else log.error)(f"calibration of the replayed bag: {message}")
 
-    def _problem(self, text: str) -> None:
+    def _problem(self, kind: str, text: str) -> None:
         self.last_problem = text
-        self._warn.warn(text)
+        self._warn.warn(kind, text)
 
     # -- services ----------------------------------------------------------------------------
     def _on_calibrate(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
@@ -392,7 +407,8 @@ class CalibrationNode(Node):
             try:
                 result = self._calibrator.calibrate(views, self.board,
                                                     (views[0].depth.shape[1], views[0].depth.shape[0]),
-                                                    self._param("depth.convention"))
+                                                    self._param("depth.convention"),
+                                                    timeout=self._param("calibration.timeout"))
             except CalibrationError as exc:
                 return False, f"calibration failed: {exc}"
             except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
