@@ -286,6 +286,22 @@ def test_a_cut_off_mcap_recording_gives_every_frame_before_the_cut(tmp_path, met
         BagSource(path).__enter__()
 
 
+def test_unstamped_images_are_paired_by_the_recorders_time(tmp_path):
+    """A driver that leaves header stamps at 0: every message would be "not after the previous";
+    the bag's receive times pair and order them instead, and the count says so."""
+    path = tmp_path / "unstamped"
+    with BagWriter(path, "mcap") as bag:
+        for i in range(6):
+            amplitude, depth = _images(i)
+            bag.write(AMP, bag.image_message(amplitude, "mono16", 0.0, "tof"), 10.0 + i)
+            bag.write(DEPTH, bag.image_message(depth, "16UC1", 0.0, "tof"), 10.0 + i + 0.002)
+    with BagSource(path) as source:
+        frames, skips = _frames(source)
+        assert source.unstamped == 12
+    assert skips == [] and [f.stamp for f in frames] == pytest.approx([10.0 + i for i in range(6)], abs=0.01)
+    assert all(np.array_equal(f.decode()[0], _images(i)[0]) for i, f in enumerate(frames))
+
+
 # -- property: whatever a bag holds, reading it yields frames or named skips ---------------------
 def _hostile_messages():
     from hypothesis import strategies as st

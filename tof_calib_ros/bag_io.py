@@ -210,6 +210,7 @@ class BagSource:
         self._flags = flags
         self._reader: AnyReader | SalvageReader | None = None
         self.unpaired = {"amplitude": 0, "depth": 0}
+        self.unstamped = 0   # messages whose header stamp was 0, stamped with the bag's time instead
 
     def __enter__(self) -> BagSource:
         if not self.path.exists():
@@ -306,6 +307,9 @@ class BagSource:
                 msg = self._reader.deserialize(raw, conn.msgtype)
                 stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
                 fields = ImageFields.of(msg)
+                if stamp == 0.0:   # a driver that leaves its images unstamped: the recorder's time pairs them
+                    stamp = t_ns * 1e-9
+                    self.unstamped += 1
             except Exception as exc:  # noqa: BLE001 - garbage bytes raise many kinds
                 yield Skip("undecodable", where, _describe(exc))
                 continue

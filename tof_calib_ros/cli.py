@@ -183,11 +183,15 @@ def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Sk
     return summary, replay.collector
 
 
-def _print_summary(summary: Summary, collector: ViewCollector, unpaired: dict[str, int] | None = None) -> None:
+def _print_summary(summary: Summary, collector: ViewCollector, unpaired: dict[str, int] | None = None,
+                   unstamped: int = 0) -> None:
     print(f"frames: {summary.frames} judged, {summary.boards} with a board, {len(collector.views)} views kept")
     print(f"coverage: {_coverage(collector)}")
     if summary.rejections:
         print("not kept: " + ", ".join(f"{n} {reason}" for reason, n in summary.rejections.most_common()))
+    if unstamped:
+        print(f"unstamped: {unstamped} messages had a header stamp of 0 (the driver does not stamp its images): "
+              "paired and ordered by the time the recorder received them")
     if unpaired and any(unpaired.values()):
         print("unpaired: " + ", ".join(f"{n} {role}" for role, n in unpaired.items() if n)
               + " frames had no partner within the pairing slop (--slop)")
@@ -209,9 +213,13 @@ def _require_views(summary: Summary, collector: ViewCollector, board: Board, vie
                                      "(--size counts interior corners, as camera_calibration does)")
     n = len(collector.views)
     if n < views_min:
-        why = ", ".join(f"{reason} ({count})" for reason, count in summary.rejections.most_common(3))
-        raise Failure(EXIT_TOO_FEW_VIEWS, f"only {n} views collected, need {views_min} (--views-min); "
-                                          f"frames were rejected as: {why}")
+        why = []
+        for what, counts in (("frames were rejected as", summary.rejections), ("messages were skipped as",
+                                                                                summary.skipped)):
+            if counts:
+                why.append(f"{what}: " + ", ".join(f"{reason} ({c})" for reason, c in counts.most_common(3)))
+        raise Failure(EXIT_TOO_FEW_VIEWS, f"only {n} views collected, need {views_min} "
+                                          "(--views-min); " + "; ".join(why))
 
 
 def _output_dir(path: Path) -> Path:
@@ -294,7 +302,7 @@ def _bag_frames(args: argparse.Namespace, board: Board, path: Path):
                   "camera_info": None if info is None else {"width": info.width, "height": info.height,
                                                             "camera_matrix": info.K.tolist(),
                                                             "distortion_coefficients": info.D.tolist()}}
-        _print_summary(summary, collector, bag.unpaired)
+        _print_summary(summary, collector, bag.unpaired, bag.unstamped)
     return summary, collector, source
 
 
