@@ -6,7 +6,7 @@ decoders fed garbage.
 Faults: each kind of fault an adversarial run found in the offline tool and the files, tried
 again (``faults``): writes killed at every rename, out of file-size quota, two writers, bad
 command lines, hostile files among good stills, calibration files the check would misread,
-an MCAP recording cut off at ten places. Counted per kind: inputs tried, refused with a
+a recording cut off at ten places in each storage. Counted per kind: inputs tried, refused with a
 message, worked, tracebacks, data lost.
 
 Soak: the simulated camera streams at 30 Hz into the calibration node for ``--minutes`` while
@@ -391,7 +391,6 @@ def faults(log=print) -> dict:
     many ended in a one-line refusal or worked, tracebacks, and data lost (a reader seeing a mixed
     or damaged calibration set, a good set changed by a failed run, a frame lost that was readable)."""
     from tof_calib_ros import Board, sim
-    from tof_calib_ros.bag_io import BagWriter
     from tof_calib_ros.calibration_file import save_views
     from tof_calib_ros.core.pipeline import View
 
@@ -500,29 +499,36 @@ def faults(log=print) -> dict:
         sum(code == 0 for code, _, _ in results), sum("Traceback" in t for _, t, _ in results),
         sum(code == 0 for code, _, _ in results), f"slowest {max(s for _, _, s in results):.1f} s")
 
-    # an MCAP recording cut off at ten places (a recorder killed): frames before the cut
-    bag = work / "rec"
-    with BagWriter(bag, "mcap") as w:
+    # a recording cut off at ten places (a recorder killed), in each storage: frames before the cut
+    for storage, suffix in (("mcap", ".mcap"), ("sqlite3", ".db3")):
+        _cut_recording(work, storage, suffix, views, board, row)
+    return rows
+
+
+def _cut_recording(work: Path, storage: str, suffix: str, views: list, board: list[str], row) -> None:
+    from tof_calib_ros.bag_io import BagWriter
+
+    bag = work / f"rec_{storage}"
+    with BagWriter(bag, storage) as w:
         for i, view in enumerate(v for v in views for _ in range(3)):   # each pose held for 3 frames
             stamp = 100.0 + 0.1 * i
             w.write("/tof/amplitude/image_raw", w.image_message(view.amplitude, "mono16", stamp, "tof"), stamp)
             w.write("/tof/depth/image_raw", w.image_message(np.rint(view.depth * 1000).astype(np.uint16), "16UC1",
                                                             stamp, "tof"), stamp)
-    mcap = next(bag.glob("*.mcap"))
-    whole = mcap.read_bytes()
+    file = next(bag.glob(f"*{suffix}"))
+    whole = file.read_bytes()
     (bag / "metadata.yaml").unlink()   # killed before it closed the bag
     recovered, results = [], []
     for fraction in np.linspace(0.1, 0.95, 10):
-        mcap.write_bytes(whole[:int(len(whole) * fraction)])
-        code, text, _ = _cli("bag", bag, *board, "--output", work / "cut_out", "--views-min", "3")
+        file.write_bytes(whole[:int(len(whole) * fraction)])
+        code, text, _ = _cli("bag", bag, *board, "--output", work / f"cut_out_{storage}", "--views-min", "3")
         results.append((code, text))
         judged = [int(line.split()[1]) for line in text.splitlines() if line.startswith("frames:")]
         recovered.append(judged[0] if judged else 0)
-    row("MCAP recording cut off (no summary, no metadata.yaml)", 10,
+    row(f"{storage} recording cut off (no metadata.yaml)", 10,
         sum(code != 0 for code, _ in results), sum(code == 0 for code, _ in results),
         sum("Traceback" in t for _, t in results), int(recovered != sorted(recovered) or recovered[-1] < 40),
         f"frame pairs read at 10 % to 95 % of the file: {recovered} of {len(views) * 3}")
-    return rows
 
 
 def main() -> int:

@@ -155,3 +155,24 @@ def test_a_yaml_alias_bomb_is_refused_before_it_expands(tmp_path: Path) -> None:
         read_camera_yaml(big)
     (tmp_path / "ok.yaml").write_text(GOOD_YAML)
     assert read_camera_yaml(tmp_path / "ok.yaml").K[0, 0] == 284.4
+
+
+def test_calibrate_raises_only_calibration_error(monkeypatch) -> None:
+    """What no check foresaw (here OpenCV asserting, as it once did on a 3-view 205x170 subset)
+    reaches the caller as a CalibrationError naming it, not as cv2.error."""
+    import cv2
+
+    from tof_calib_ros.core import pipeline
+
+    cam = sim.pmd_camera()
+    views = []
+    for rvec, tvec in sim.random_poses(cam, BOARD, 3, 5, distance=(0.5, 1.0)):
+        f = sim.render(cam, BOARD, rvec, tvec, rng=5)
+        views.append(View(f.depth, f.corners))
+
+    def asserting(*_args, **_kwargs):
+        raise cv2.error("OpenCV(5.0.0) error: (-215:Assertion failed) m.dims >= 2 in function 'Mat'")
+
+    monkeypatch.setattr(pipeline, "_calibrate", asserting)
+    with pytest.raises(CalibrationError, match=r"the views cannot be calibrated: error: .*m.dims >= 2"):
+        calibrate(views, BOARD)

@@ -25,7 +25,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
-from .bag_salvage import SalvageReader, mcap_files
+from .bag_salvage import McapSalvage, SqliteSalvage, storage_files
 from .core.errors import CalibrationError
 from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
 from .replay import FrameError, Skip
@@ -208,7 +208,7 @@ class BagSource:
         self.slop, self.depth_scale = slop, depth_scale
         self._requested = (amplitude, depth, camera_info)
         self._flags = flags
-        self._reader: AnyReader | SalvageReader | None = None
+        self._reader: AnyReader | McapSalvage | SqliteSalvage | None = None
         self.unpaired = {"amplitude": 0, "depth": 0}
         self.unstamped = 0   # messages whose header stamp was 0, stamped with the bag's time instead
 
@@ -233,21 +233,19 @@ class BagSource:
     def __exit__(self, *_exc: object) -> None:
         self.close()
 
-    def _salvage(self, exc: Exception) -> SalvageReader:
-        """A recording rosbags cannot open: an MCAP one cut off (a recorder killed mid-way leaves
-        no summary and no metadata.yaml) is read record by record up to the cut."""
+    def _salvage(self, exc: Exception) -> McapSalvage | SqliteSalvage:
+        """A recording rosbags cannot open: one cut off (a recorder killed mid-way leaves no MCAP
+        summary, a sqlite3 file SQLite refuses, no metadata.yaml) is read up to the cut."""
         why = f"{self.path}: cannot open the bag ({_describe(exc)})"
-        files = mcap_files(self.path)
-        if not files:
-            if "malformed" in str(exc) and any(self.path.glob("*.db3")):
-                why += ("; SQLite refuses a cut-off or damaged file whole, so nothing of it can be read "
-                        "(record in mcap, Jazzy's default storage: a cut-off mcap is read up to the cut)")
-            raise BagError(why) from None
-        reader = SalvageReader(files)
-        if not reader.connections:
-            raise BagError(f"{why}; read in order, it holds no message either"
-                           + (f" ({reader.cut})" if reader.cut else "")) from None
-        return reader
+        for suffix, salvage in ((".mcap", McapSalvage), (".db3", SqliteSalvage)):
+            files = storage_files(self.path, suffix)
+            if files:
+                reader = salvage(files)
+                if not reader.connections:
+                    raise BagError(f"{why}; read as far as it goes, it holds no message either"
+                                   + (f" ({reader.cut})" if reader.cut else "")) from None
+                return reader
+        raise BagError(why) from None
 
     def close(self) -> None:
         if self._reader is not None:
@@ -258,8 +256,10 @@ class BagSource:
     def storage(self) -> str:
         if not self._reader.is2:
             return "ROS 1 bag"
-        if isinstance(self._reader, SalvageReader):
+        if isinstance(self._reader, McapSalvage):
             return "mcap, read in order up to where it ends (no summary or metadata.yaml)"
+        if isinstance(self._reader, SqliteSalvage):
+            return "sqlite3, read page by page up to where it ends (SQLite refuses it, or no metadata.yaml)"
         return "rosbag2 " + ("mcap" if any(self.path.glob("*.mcap*")) else "sqlite3")
 
     @property
@@ -331,7 +331,7 @@ class BagSource:
                 pairs += 1
                 yield BagFrame(stamp, f"frame at {stamp:.3f} s", pair[0], pair[1], self.depth_scale)
         self.unpaired = {"amplitude": used[topics.amplitude] - pairs, "depth": used[topics.depth] - pairs}
-        if isinstance(self._reader, SalvageReader) and self._reader.cut:
+        if isinstance(self._reader, (McapSalvage, SqliteSalvage)) and self._reader.cut:
             yield Skip("read_error", str(self.path), f"the recording is cut off, every message before the cut was "
                                                      f"read ({self._reader.cut})")
 
