@@ -15,7 +15,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_helpers import RESEND_S, START_TIMEOUT_S, call_together, logs, set_parameter, wait_until  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
@@ -75,6 +75,16 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     assert report["topics"] == {"amplitude": "/tof/amplitude", "depth": "/tof/depth"}, report["topics"]
     n_views = len(list((out / "views").glob("*_ir.png")))
     assert n_views >= 8 and len(list((out / "views").glob("*_depth.png"))) == n_views
+
+    # The diagnostics say it is calibrated (not "collecting views" at WARN); one key for the last rejection.
+    statuses = []
+    spinner.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: statuses.extend(
+        s for s in m.status if s.name == "/calibration_node: view collection"), 10)
+    status = wait_until(lambda: next((s for s in reversed(statuses) if s.message.startswith("calibrated (fx=")),
+                                     None), 15.0, "diagnostics saying calibrated", *procs)
+    keys = [v.key for v in status.values]
+    assert status.level == DiagnosticStatus.OK and "last rejection" in keys and "last_reason" not in keys, keys
+    assert "accepted view" not in node.output() and "accepted as view 1\n" in node.output()   # said once
 
     # Two calibrations at once: both answered; one may be turned away, saying so.
     for resp in call_together(spinner, "/calibration_node/calibrate", 2, 60.0, *procs):
@@ -179,7 +189,10 @@ def test_services_answer_and_refuse_with_reasons(launch, spinner):
                         procs=procs, resend_after=RESEND_S)
     assert resp.success and resp.message == "cleared 0 views", resp.message
     resp = spinner.call(Trigger, "/t3/calibration_node/calibrate", timeout=10.0, procs=procs, resend_after=RESEND_S)
-    assert not resp.success and "only 0 views collected, need 5" in resp.message, resp.message
+    # nothing publishes on its topics: the answer says so, and where it listens
+    assert not resp.success and resp.message.startswith(
+        "only 0 views collected, need 5: no frame has arrived on '/t3/amplitude' or '/t3/depth': check the remaps"), \
+        resp.message
     resp = spinner.call(Trigger, "/t3/calibration_node/commit", timeout=10.0, procs=procs, resend_after=RESEND_S)
     assert not resp.success and "nothing to commit" in resp.message, resp.message
     for resp in call_together(spinner, "/t3/calibration_node/calibrate", 2, 10.0, *procs):

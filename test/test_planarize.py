@@ -54,16 +54,16 @@ def test_noiseless_planarization_is_exact():
 
 
 def test_square_colours_and_the_outline_of_the_squared_area():
-    board = Board(3, 2, 0.05)   # 4x3 squares from (-0.05, -0.05) to (0.15, 0.10); the top-left is dark
-    x, y = np.meshgrid(np.linspace(-0.1, 0.2, 298), np.linspace(-0.1, 0.15, 247))  # no point on an edge
+    board = Board(3, 3, 0.05)   # 4x4 squares from (-0.05, -0.05) to (0.15, 0.15); the top-left is dark
+    x, y = np.meshgrid(np.linspace(-0.1, 0.2, 298), np.linspace(-0.1, 0.2, 248))  # no point on an edge
     x, y = x.ravel(), y.ravel()
     area = board.in_squared_area(x, y)
-    np.testing.assert_array_equal(area, (x >= -0.05) & (x <= 0.15) & (y >= -0.05) & (y <= 0.10))
+    np.testing.assert_array_equal(area, (x >= -0.05) & (x <= 0.15) & (y >= -0.05) & (y <= 0.15))
     white, black = board.is_white(x, y), board.is_black(x, y)
     assert not (white & black).any() and ((white | black) == area).mean() > 0.99   # only edges differ
     assert black[np.argmin(np.hypot(x + 0.025, y + 0.025))] and white[np.argmin(np.hypot(x - 0.025, y + 0.025))]
     inner = board.in_squared_area(x, y, margin=0.2)
-    np.testing.assert_array_equal(inner, (x >= -0.04) & (x <= 0.14) & (y >= -0.04) & (y <= 0.09))
+    np.testing.assert_array_equal(inner, (x >= -0.04) & (x <= 0.14) & (y >= -0.04) & (y <= 0.14))
 
 
 def test_white_squares_follow_the_amplitude_when_the_labelling_is_turned():

@@ -70,10 +70,16 @@ class CalibrationWorker:
 
     def _restart(self, kill: bool = False) -> None:
         if kill:
-            for process in list(self._pool._processes.values()):   # noqa: SLF001 - no public way to kill it
-                process.kill()
+            self._kill()
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._start()
 
+    def _kill(self) -> None:
+        for process in list((self._pool._processes or {}).values()):   # noqa: SLF001 - no public way to kill it
+            process.kill()
+
     def close(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Kill the worker and wait for the pool's threads: left running, they met closed pipes at
+        the interpreter's exit (an "OSError: Bad file descriptor" traceback on some stops)."""
+        self._kill()
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -94,7 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     from sensor_msgs.msg import CameraInfo
     from std_srvs.srv import Trigger
 
-    env = ros_environment()
+    # a domain the user set is kept, so they can watch the demo with their own tools
+    mine = os.environ.get("ROS_DOMAIN_ID", "")
+    env = ros_environment(int(mine) if mine.isdigit() else None)
     out = args.output or Path(tempfile.mkdtemp(prefix="tof_calib_demo_"))
     out.mkdir(parents=True, exist_ok=True)
     driver_file = out / "driver_camera_info.yaml"

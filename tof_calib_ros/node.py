@@ -25,18 +25,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import (
-    ConditionReachedException,
-    ExternalShutdownException,
-    MultiThreadedExecutor,
-    ShutdownException,
-    TimeoutException,
-)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -52,6 +43,7 @@ from .collector import CollectorConfig, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .output_folder import write_calibration
 from .replay import FrameError, Skip, decode_sized
+from .ros_run import Executor, run
 from .stamp_sync import StampSync
 from .tracking import BoardTracker
 
@@ -136,35 +128,6 @@ class _RateLimitedLog:
         self._logger.warning(text + (f" ({held} more like it in the last {self._period:g} s)" if held else ""))
 
 
-class _Executor(MultiThreadedExecutor):
-    """MultiThreadedExecutor that hands each task to its thread pool once.
-
-    Jazzy's (rclpy 7.1) yields a task again while it still waits in the pool and submits it again;
-    under a steady stream of frames its spinning thread then does little else, holding the GIL, and
-    the callbacks starve: frames are lost before they are paired and ~/calibrate is answered
-    seconds late (ros2/rclpy#1452, fixed in later rclpy). A task is submitted again only once its
-    previous run has ended (a coroutine resumed after an await).
-    """
-
-    def __init__(self, num_threads: int) -> None:
-        super().__init__(num_threads=num_threads)
-        self._runs: dict = {}   # task -> its latest run in the pool
-
-    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
-        try:
-            task, _entity, _node = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
-        except (ExternalShutdownException, ShutdownException, TimeoutException, ConditionReachedException):
-            return
-        run = self._runs.get(task)
-        if run is not None and not run.done():
-            time.sleep(0.001)   # it waits for a pool thread: let one take the GIL and start it
-            return
-        self._runs[task] = self._executor.submit(task)
-        for done in [t for t in self._runs if t.done()]:
-            del self._runs[done]
-            done.result()   # raise what a callback raised, as MultiThreadedExecutor does
-
-
 class CalibrationNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("calibration_node", **kwargs)
@@ -194,6 +157,8 @@ class CalibrationNode(Node):
         self.driver_info: CameraInfo | None = None
         self.frame_id = ""
         self.dropped = 0
+        self.received = [0, 0]                 # frames that arrived on amplitude and on depth
+        self.paired = 0
         self.last_problem = ""
         self.bag_topics: dict[str, str] = {}   # the bag's, when replaying one
 
@@ -270,9 +235,11 @@ class CalibrationNode(Node):
     def _on_image(self, stream: int, msg: Image) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         with self._sync_lock:
+            self.received[stream] += 1
             pair = self.sync.add(stream, stamp, msg)
         if pair is None:
             return
+        self.paired += 1
         with self._wake:
             if len(self._frames) == self._frames.maxlen:
                 self.dropped += 1
@@ -332,9 +299,8 @@ class CalibrationNode(Node):
             if generation != self._generation:
                 return
             outcome = self.collector.add(amplitude, depth, stamp, located=found)
-            count = len(self.collector.views)
         if outcome.accepted:
-            self.get_logger().info(f"accepted view {count}: {outcome.reason}")
+            self.get_logger().info(outcome.reason)
         else:
             self.last_problem = outcome.reason
 
@@ -400,8 +366,7 @@ class CalibrationNode(Node):
                 views = list(self.collector.views)
             need = self._param("views.min")
             if len(views) < need:
-                return False, (f"only {len(views)} views collected, need {need}: move the board to new "
-                               f"positions, distances and tilts (last rejection: {self.last_problem or 'none'})")
+                return False, self._too_few(len(views), need)
             t0 = time.monotonic()
             encoded = self._encoder.submit(encode_views, views)   # the files, while the worker calibrates
             try:
@@ -427,6 +392,25 @@ class CalibrationNode(Node):
             return True, message
         finally:
             self._calibrating.release()
+
+    def _too_few(self, n: int, need: int) -> str:
+        """Why there are too few views, starting from the first thing missing."""
+        head = f"only {n} views collected, need {need}: "
+        if not self._param("bag.path"):
+            topics = [self.resolve_topic_name(t) for t in ("amplitude", "depth")]
+            missing = [t for t, count in zip(topics, self.received) if count == 0]
+            if missing:
+                return head + (f"no frame has arrived on {' or '.join(map(repr, missing))}"
+                               + (f" (frames do arrive on {[t for t in topics if t not in missing][0]!r})"
+                                  if len(missing) == 1 else "")
+                               + ": check the remaps (--ros-args -r amplitude:=... -r depth:=...) and that the "
+                               "camera publishes")
+            if self.paired == 0:
+                return head + (f"{self.received[0]} amplitude and {self.received[1]} depth frames arrived but none "
+                               f"pair: their header stamps differ by more than sync.slop "
+                               f"({self._param('sync.slop'):g} s)")
+        return head + ("move the board to new positions, distances and tilts (last rejection: "
+                       f"{self.last_problem or 'none'})")
 
     def _write(self, result: CalibrationResult, views: EncodedViews) -> None:
         # what it takes to recalibrate from views/ or to trace the result back to its source
@@ -499,9 +483,15 @@ class CalibrationNode(Node):
         # the fully qualified name tells two cameras' calibration nodes apart
         status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: view collection",
                                   hardware_id=self.frame_id)
-        status.level = DiagnosticStatus.OK if progress["good_enough"] else DiagnosticStatus.WARN
-        status.message = "enough views to calibrate" if progress["good_enough"] else "collecting views"
-        values = {k: v for k, v in progress.items() if not isinstance(v, dict)}
+        if self.result is not None:
+            status.level = DiagnosticStatus.OK
+            status.message = (f"calibrated (fx={self.result.K[0, 0]:.2f} fy={self.result.K[1, 1]:.2f}, "
+                              f"{len(self.result.views)} views); still collecting")
+        else:
+            status.level = DiagnosticStatus.OK if progress["good_enough"] else DiagnosticStatus.WARN
+            status.message = "enough views to calibrate" if progress["good_enough"] else "collecting views"
+        values = {k: v for k, v in progress.items() if not isinstance(v, dict) and k != "last_reason"}
+        values["frames received (amplitude, depth)"] = f"{self.received[0]}, {self.received[1]}"
         values.update({f"coverage.{k}": a["progress"] for k, a in progress["axes"].items()})
         values["frames dropped (worker busy)"] = self.dropped
         values["last rejection"] = self.last_problem
@@ -522,24 +512,9 @@ class CalibrationNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = CalibrationNode()
-    except (InvalidParameterValueException, InvalidParameterTypeException, CalibrationError) as exc:
-        # a bad -p override: say which and why, without a traceback
-        rclpy.logging.get_logger("calibration_node").fatal(str(exc))
-        rclpy.try_shutdown()
-        return 1
-    executor = _Executor(num_threads=4)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run("calibration_node", CalibrationNode, __doc__,
+               {name: (default, desc.description) for name, (default, desc) in PARAMETERS.items()}, args,
+               executor=lambda: Executor(num_threads=4))
 
 
 if __name__ == "__main__":

@@ -9,9 +9,7 @@ file and answers with success and a status message).
 from __future__ import annotations
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -19,29 +17,31 @@ from sensor_msgs.srv import SetCameraInfo
 
 from . import Board, CalibrationError, sim
 from .calibration_file import CalibrationFileError, write_camera_yaml
+from .ros_run import run
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
+# name: (default, description); all read-only
+PARAMETERS = {
+    "camera": ("pmd", "'pmd' (200x200) or 'azure' (640x576)"),
+    "rate": (15.0, "frames per second"),
+    "hold": (4, "frames each board pose is held still"),
+    "board.cols": (5, "interior corners per row"),
+    "board.rows": (7, "interior corners per column"),
+    "board.square": (0.03, "square size, metres"),
+    "depth.convention": ("z", "'z' or 'radial'"),
+    "depth.encoding": ("16UC1", "'16UC1' (millimetres) or '32FC1' (metres)"),
+    "depth.offset": (0.02, "systematic depth offset, metres"),
+    "frame_id": ("tof_optical_frame", "frame_id of the images"),
+    "calibration_file": ("", "where set_camera_info stores the calibration (empty: memory only)"),
+    "seed": (0, "random seed of the poses and the noise"),
+}
 FACTORY_ERROR = 1.04  # the published factory focal length is 4 % off, as a miscalibrated driver's
 
 
 class SimCameraNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("tof_sim_node", **kwargs)
-        params = {
-            "camera": ("pmd", "'pmd' (200x200) or 'azure' (640x576)"),
-            "rate": (15.0, "frames per second"),
-            "hold": (4, "frames each board pose is held still"),
-            "board.cols": (5, "interior corners per row"),
-            "board.rows": (7, "interior corners per column"),
-            "board.square": (0.03, "square size, metres"),
-            "depth.convention": ("z", "'z' or 'radial'"),
-            "depth.encoding": ("16UC1", "'16UC1' (millimetres) or '32FC1' (metres)"),
-            "depth.offset": (0.02, "systematic depth offset, metres"),
-            "frame_id": ("tof_optical_frame", "frame_id of the images"),
-            "calibration_file": ("", "where set_camera_info stores the calibration (empty: memory only)"),
-            "seed": (0, "random seed of the poses and the noise"),
-        }
-        for name, (default, text) in params.items():
+        for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True))
         p = lambda name: self.get_parameter(name).value  # noqa: E731
         self._check(p)
@@ -138,21 +138,7 @@ class SimCameraNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    try:
-        node = SimCameraNode()
-    except CalibrationError as exc:   # a bad parameter, or a board that cannot be posed in view
-        rclpy.logging.get_logger("tof_sim_node").fatal(str(exc))
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run("tof_sim_node", SimCameraNode, __doc__, PARAMETERS, args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,105 @@
+"""How the package's nodes run: usage on ``--help``, the executor, and a clean end on a signal.
+
+rclpy's own signal handler shuts the context down the moment SIGINT arrives, while callbacks
+may still be publishing: the simulated camera then ended every Ctrl-C with "RCLError: Failed to
+publish: publisher's context is invalid" and exit 1. Here SIGINT and SIGTERM stop the executor
+first (a KeyboardInterrupt in the spinning thread), running callbacks finish, the node is
+destroyed, and only then is the context shut down: exit 0, no traceback.
+
+``Executor`` is the multi-threaded executor the calibration node needs on Jazzy (see its doc).
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import (
+    ConditionReachedException,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    ShutdownException,
+    SingleThreadedExecutor,
+    TimeoutException,
+)
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from .core.errors import CalibrationError
+
+STOP_TIMEOUT_S = 5.0   # callbacks still running when a signal comes get this long to finish
+
+
+class Executor(MultiThreadedExecutor):
+    """MultiThreadedExecutor that hands each task to its thread pool once.
+
+    Jazzy's (rclpy 7.1) yields a task again while it still waits in the pool and submits it again;
+    under a steady stream of frames its spinning thread then does little else, holding the GIL, and
+    the callbacks starve: frames are lost before they are paired and ~/calibrate is answered
+    seconds late (ros2/rclpy#1452, fixed in later rclpy). A task is submitted again only once its
+    previous run has ended (a coroutine resumed after an await).
+    """
+
+    def __init__(self, num_threads: int) -> None:
+        super().__init__(num_threads=num_threads)
+        self._runs: dict = {}   # task -> its latest run in the pool
+
+    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
+        try:
+            task, _entity, _node = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
+        except (ExternalShutdownException, ShutdownException, TimeoutException, ConditionReachedException):
+            return
+        run = self._runs.get(task)
+        if run is not None and not run.done():
+            time.sleep(0.001)   # it waits for a pool thread: let one take the GIL and start it
+            return
+        self._runs[task] = self._executor.submit(task)
+        for done in [t for t in self._runs if t.done()]:
+            del self._runs[done]
+            done.result()   # raise what a callback raised, as MultiThreadedExecutor does
+
+
+def usage(name: str, doc: str, parameters: Mapping[str, tuple[Any, str]]) -> str:
+    """What ``--help`` prints: the node's docstring and its parameters with their defaults."""
+    width = max(map(len, parameters), default=0)
+    lines = [f"usage: ros2 run tof_calib_ros {name} [--ros-args [-r FROM:=TO] [-p NAME:=VALUE] ...]", "",
+             doc.strip(), "", "parameters (-p NAME:=VALUE):"]
+    lines += [f"  {p:<{width}}  {default!r:<12} {text}" for p, (default, text) in parameters.items()]
+    return "\n".join(lines)
+
+
+def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[str, tuple[Any, str]],
+        args: list[str] | None = None, executor: Callable[[], Any] = SingleThreadedExecutor) -> int:
+    """Run a node until SIGINT or SIGTERM; returns the exit code. ``-h``/``--help`` before any
+    ``--ros-args`` prints the usage instead. A node that cannot start (a bad parameter) exits 1
+    with the reason, without a traceback."""
+    argv = sys.argv[1:] if args is None else args
+    own = argv[:argv.index("--ros-args")] if "--ros-args" in argv else argv
+    if "-h" in own or "--help" in own:
+        print(usage(name, doc, parameters))
+        return 0
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)   # SIGTERM ends the node as SIGINT does
+    try:
+        node = make_node()
+    except (InvalidParameterValueException, InvalidParameterTypeException, CalibrationError) as exc:
+        rclpy.logging.get_logger(name).fatal(str(exc))
+        rclpy.try_shutdown()
+        return 1
+    spinner = executor()
+    spinner.add_node(node)
+    try:
+        spinner.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not cut the clean-up short
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        spinner.shutdown(timeout_sec=STOP_TIMEOUT_S)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
