@@ -9,8 +9,8 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
 
-from ros_helpers import START_TIMEOUT_S, executable, logs, wait_until  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from ros_helpers import START_TIMEOUT_S, executable, logs, wait_until  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
 from tof_calib_ros.node import PARAMETERS  # noqa: E402
