@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import CameraInfo
+    from sensor_msgs.msg import CameraInfo, Image
     from std_srvs.srv import Trigger
 
     # a domain the user set is kept, so they can watch the demo with their own tools
@@ -119,12 +119,15 @@ def main(argv: list[str] | None = None) -> int:
         spinner = Spinner(context, "tof_calib_demo")
         latest: dict = {}
         spinner.node.create_subscription(DiagnosticArray, "/diagnostics", _progress_printer(latest), 10)
+        pictures: list = []   # what rqt_image_view would show of ~/board_image; the last one is saved
+        spinner.node.create_subscription(Image, "/calibration_node/board_image", pictures.append, 2)
         print("$ ros2 run tof_calib_ros tof_sim_node ...   (the simulated camera)\n"
               "$ ros2 run tof_calib_ros calibration_node ...   (collecting views)")
         wait_until(lambda: latest, START_TIMEOUT_S, "the calibration node's first diagnostics", *procs)
         wait_until(lambda: int(latest.get("views", 0)) >= args.views, COLLECT_TIMEOUT_S,
                    lambda: f"{args.views} views (have {latest.get('views')}, last rejection "
                            f"{latest.get('last rejection')!r})", *procs, period=0.2)
+        picture = _save_picture(pictures, out / "board_image.png")
         print("$ ros2 service call /calibration_node/calibrate std_srvs/srv/Trigger")
         print("  " + _calibrate(spinner, procs))
 
@@ -148,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         stored = read_camera_yaml(driver_file) if driver_file.exists() else None
         same = stored is not None and np.allclose(stored.K, np.reshape(info.k, (3, 3)))
         print(f"\nthe driver now holds the calibration: {same} ({driver_file})")
-        print(f"outputs: {out / 'calibration.yaml'}, {out / 'calibration.json'}, {out / 'views'}/")
+        print(f"outputs: {out / 'calibration.yaml'}, {out / 'calibration.json'}, {out / 'views'}/"
+              + (f", {picture} (~/board_image)" if picture else ""))
         return 0 if commit.success and result["verdict"]["ok"] and same else 1
     except RosProcessError as exc:
         print(f"demo failed: {exc}")
@@ -159,6 +163,17 @@ def main(argv: list[str] | None = None) -> int:
         for p in procs:
             p.stop()
         rclpy.shutdown(context=context)
+
+
+def _save_picture(pictures: list, path: Path) -> Path | None:
+    """The last ~/board_image as a PNG (bgr8, as OpenCV writes it)."""
+    if not pictures:
+        return None
+    import cv2
+
+    msg = pictures[-1]
+    image = np.frombuffer(bytes(msg.data), np.uint8).reshape(msg.height, msg.width, 3)
+    return path if cv2.imwrite(str(path), image) else None
 
 
 if __name__ == "__main__":
