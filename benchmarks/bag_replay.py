@@ -45,8 +45,8 @@ def measure(bag: Path, workers: int) -> dict:
 
     from tof_calib_ros import Board
     from tof_calib_ros.bag_io import BagSource
-    from tof_calib_ros.cli import collector_config
     from tof_calib_ros.replay import Replay
+    from tof_calib_ros.settings import collector_config, defaults
 
     me = psutil.Process()
     peak = {"main": 0, "total": 0}
@@ -72,7 +72,8 @@ def measure(bag: Path, workers: int) -> dict:
     t0, cpu0 = time.perf_counter(), sum(me.cpu_times()[:2])
     with BagSource(bag) as source:
         info = source.camera_info
-        replay = Replay(Board(5, 7, 0.03), collector_config(), workers=workers, image_size=(info.width, info.height))
+        replay = Replay(Board(5, 7, 0.03), collector_config(defaults()), workers=workers,
+                        image_size=(info.width, info.height))
         summary = replay.run(source.frames())
     seconds = time.perf_counter() - t0
     done.set()

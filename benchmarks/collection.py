@@ -40,12 +40,13 @@ import numpy as np
 
 from tof_calib_ros import Board, calibrate
 from tof_calib_ros.bag_io import BagSource
-from tof_calib_ros.cli import VIEWS_MAX, collector_config
 from tof_calib_ros.collector import CollectorConfig
 from tof_calib_ros.replay import Replay, default_workers
+from tof_calib_ros.settings import SETTINGS, collector_config, defaults
 from tof_calib_ros.sim_recording import Scene, truth_path, write_recording
 
 BOARD = Board(5, 7, 0.03)
+VIEWS_MAX = SETTINGS["views.max"].default
 RATES = (5.0, 10.0, 30.0)
 CAMERAS = ("pmd", "azure")
 EXPOSURES = (0.005, 0.01, 0.02)
@@ -76,7 +77,7 @@ def _errors(K: np.ndarray, truth: np.ndarray) -> float:
 
 def offline(bag: Path, per_frame: list[dict]) -> dict:
     with BagSource(bag) as source:
-        replay = Replay(BOARD, collector_config(), workers=default_workers())
+        replay = Replay(BOARD, collector_config(defaults()), workers=default_workers())
         taken: list[bool] = []
         add = replay.collector.add
 

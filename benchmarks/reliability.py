@@ -468,7 +468,7 @@ def faults(log=print) -> dict:
     code, text, seconds = _cli("images", folder, *board, "--output", work / "stills_out")
     skipped = re.search(r"(\d+) too_large", text)
     too_large = int(skipped[1]) if skipped else 0
-    used = re.search(r"calibration \((\d+) of (\d+) views", text)
+    used = re.search(r"(\d+) of (\d+) views used", text)
     row("hostile files among 16 stills", 3, too_large, int(code == 0), int("Traceback" in text), int(code != 0),
         f"exit {code} in {seconds:.1f} s; {too_large} pairs too large skipped, the 1e300 depth read as invalid; "
         f"views used: {used[1] if used else 0} of {used[2] if used else 0}")

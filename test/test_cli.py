@@ -28,12 +28,13 @@ from tof_calib_ros.cli import (
     EXIT_TOO_FEW_VIEWS,
     EXIT_UNREADABLE,
     EXIT_USAGE,
-    MAX_BLUR_PX,
-    VIEWS_MAX,
     Progress,
     main,
 )
+from tof_calib_ros.settings import SETTINGS
 from tof_calib_ros.sim_recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
+
+VIEWS_MAX, MAX_BLUR_PX = SETTINGS["views.max"].default, SETTINGS["motion.max_blur_px"].default
 
 BOARD = ["--size", "5x7", "--square", "0.03"]
 SIM = ["--frames", "240", "--hold", "5", "--transit", "5", "--seed", "1"]
@@ -102,6 +103,7 @@ def test_a_simulated_recording_calibrates_to_its_ground_truth(bags, tmp_path, ca
     assert len(re.findall(r"<svg|<img", report)) >= 1
 
 
+@pytest.mark.slow
 def test_one_worker_and_two_keep_the_same_views(bags, calibrated, tmp_path, capsys):
     code, _, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path, "--workers", "1")
     assert code == EXIT_OK, err
@@ -130,6 +132,7 @@ def _sharp_frames(bag: Path) -> int:
     return sum(f["board"] == "whole" and f["blur_px"] <= MAX_BLUR_PX for f in _truth(bag)["per_frame"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rate, frames, seed", [(10, 200, 3), (5, 100, 4), (1, 30, 5)])
 def test_a_board_that_never_stops_calibrates_at_any_frame_rate(tmp_path, capsys, rate, frames, seed):
     """A board waved without a pause, entering from the side after a second of empty frames,
@@ -163,6 +166,7 @@ def kinect_low_res(kinect_dir, tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.mark.slow
 def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_res, tmp_path, capsys):
     from tof_calib_ros.core.detection import detect
 
@@ -183,6 +187,7 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
     assert abs(K[0, 2] - ((full[0, 2] + 0.5) * s - 0.5)) < 2.5 and abs(K[1, 2] - ((full[1, 2] + 0.5) * s - 0.5)) < 2.5
 
 
+@pytest.mark.slow
 def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path, capsys):
     """A folder of stills is not thinned as a stream is: every view with a whole board is used;
     the views/ written beside the calibration hold their corners, and calibrate again to the same K."""
@@ -300,9 +305,9 @@ def test_bad_command_lines_exit_2(capsys, tmp_path):
     for option, value, reason in (("--size", "2x5", "at least 3x3 interior corners"),
                                   ("--size", "0x0", "at least 3x3 interior corners"),
                                   ("--size", "1x1", "at least 3x3 interior corners"),
-                                  ("--slop", "-1", "must be at least 0, got -1"),
-                                  ("--depth-scale", "1e300", "must be at most 10, got 1e300"),
-                                  ("--square", "30", "must be at most 10, got 30"),
+                                  ("--slop", "-1", "sync.slop must be at least 0, got -1.0"),
+                                  ("--depth-scale", "1e300", "depth.scale must be at most 10, got 1e+300"),
+                                  ("--square", "30", "board.square must be at most 10, got 30.0"),
                                   ("--depth-bias", "offset+wiggle", "depth_bias must be 'none' or terms")):
         argv = ["bag", str(tmp_path / "never_read"), *BOARD, "--output", str(tmp_path / "o"), option, value]
         with pytest.raises(SystemExit) as exc:
@@ -342,6 +347,7 @@ def test_missing_topics_exit_4(bags, capsys, tmp_path):
     assert code == EXIT_MISSING_TOPIC and "no depth image topic found" in last_line(err)
 
 
+@pytest.mark.slow
 def test_no_board_exits_5(bags, capsys, tmp_path):
     code, _, err = run(capsys, "bag", bags["sqlite3"], "--size", "9x6", "--square", "0.03", "--output", tmp_path)
     assert code == EXIT_NO_BOARD
@@ -360,6 +366,7 @@ def test_too_few_views_exit_6(capsys, tmp_path):
     assert not (tmp_path / "out" / "calibration.yaml").exists()
 
 
+@pytest.mark.slow
 def test_a_failed_quality_check_exits_7_and_leaves_the_earlier_calibration(bags, calibrated, capsys, tmp_path):
     shutil.copytree(calibrated, tmp_path, dirs_exist_ok=True, symlinks=True)
     before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}

@@ -26,6 +26,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
 from .bag_salvage import McapSalvage, SqliteSalvage, storage_files
+from .calibration_file import monocular_fields
 from .core.errors import CalibrationError
 from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
 from .replay import FrameError, Skip
@@ -387,16 +388,14 @@ class BagWriter:
 
     def camera_info_message(self, K: np.ndarray, D: np.ndarray, size: tuple[int, int], stamp: float,
                             frame_id: str) -> Any:
-        K = np.asarray(K, dtype=float)
-        matrices = {"k": K.ravel(), "d": np.asarray(D, dtype=float), "r": np.eye(3).ravel(),
-                    "p": np.hstack([K, np.zeros((3, 1))]).ravel()}
+        fields = monocular_fields(K, D, size)
+        matrices = {k: np.array(fields.pop(k)) for k in ("k", "d", "r", "p")}
         if self.storage == "ros1":
             matrices = {k.upper(): v for k, v in matrices.items()}
         roi = self._types("sensor_msgs/msg/RegionOfInterest")(x_offset=0, y_offset=0, height=0, width=0,
                                                               do_rectify=False)
-        return self._types(CAMERA_INFO)(header=self.header(stamp, frame_id), width=int(size[0]),
-                                        height=int(size[1]), distortion_model="plumb_bob", binning_x=0,
-                                        binning_y=0, roi=roi, **matrices)
+        return self._types(CAMERA_INFO)(header=self.header(stamp, frame_id), binning_x=0, binning_y=0, roi=roi,
+                                        **fields, **matrices)
 
     def write(self, topic: str, msg: Any, stamp: float) -> None:
         """A message (from ``image_message``, ``camera_info_message`` or the typestore)."""

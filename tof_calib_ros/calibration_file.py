@@ -25,7 +25,7 @@ from .core.pipeline import View, depth_in_metres
 
 DISTORTION_MODEL = "plumb_bob"
 # camera_info_manager refuses any other camera name (CameraInfoManager::validateName)
-_CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
+CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 _MAX_MM = np.iinfo(np.uint16).max
 _MAX_SIZE = np.iinfo(np.uint32).max
 
@@ -86,8 +86,19 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     return path
 
 
-def _matrix(rows: int, cols: int, values: np.ndarray) -> dict:
-    return {"rows": rows, "cols": cols, "data": [float(v) for v in values.ravel()]}
+def _matrix(rows: int, cols: int, values) -> dict:
+    return {"rows": rows, "cols": cols, "data": [float(v) for v in np.ravel(values)]}
+
+
+def monocular_fields(K: np.ndarray, D: np.ndarray, size: tuple[int, int]) -> dict:
+    """The sensor_msgs/CameraInfo fields of a monocular camera, as camera_calibration fills them:
+    plumb_bob, R the identity, P = [K | 0]. The node's message, the simulated driver's, a bag's
+    and the YAML file are all made from these."""
+    K = np.asarray(K, dtype=float).reshape(3, 3)
+    return {"width": int(size[0]), "height": int(size[1]), "distortion_model": DISTORTION_MODEL,
+            "d": [float(x) for x in np.ravel(D)], "k": [float(x) for x in K.ravel()],
+            "r": [float(x) for x in np.eye(3).ravel()],
+            "p": [float(x) for x in np.hstack([K, np.zeros((3, 1))]).ravel()]}
 
 
 def _intrinsics(source: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
@@ -121,19 +132,19 @@ def write_camera_yaml(path: str | os.PathLike, source: Any, camera_name: str) ->
 def camera_yaml(source: Any, camera_name: str) -> bytes:
     """A monocular camera has R = identity and P = [K | 0]. Floats are written in full (repr),
     so reading the file back gives the same numbers bit for bit."""
-    if not isinstance(camera_name, str) or not _CAMERA_NAME.fullmatch(camera_name):
+    if not isinstance(camera_name, str) or not CAMERA_NAME.fullmatch(camera_name):
         raise CalibrationFileError(f"camera name {camera_name!r} must be letters, digits and '_' only "
                                    "(camera_info_manager rejects anything else)")
-    K, D, (w, h) = _intrinsics(source)
+    f = monocular_fields(*_intrinsics(source))
     doc = {
-        "image_width": w,
-        "image_height": h,
+        "image_width": f["width"],
+        "image_height": f["height"],
         "camera_name": camera_name,
-        "camera_matrix": _matrix(3, 3, K),
-        "distortion_model": DISTORTION_MODEL,
-        "distortion_coefficients": _matrix(1, 5, D),
-        "rectification_matrix": _matrix(3, 3, np.eye(3)),
-        "projection_matrix": _matrix(3, 4, np.hstack([K, np.zeros((3, 1))])),
+        "camera_matrix": _matrix(3, 3, f["k"]),
+        "distortion_model": f["distortion_model"],
+        "distortion_coefficients": _matrix(1, len(f["d"]), f["d"]),
+        "rectification_matrix": _matrix(3, 3, f["r"]),
+        "projection_matrix": _matrix(3, 4, f["p"]),
     }
     # default_flow_style=None: lists (the data) in flow style, maps in block style, as
     # camera_calibration_parsers writes; an unlimited width keeps each list on one line

@@ -13,7 +13,6 @@ with one line on stderr and an exit code (see ``tof_calib --help``).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import re
 import shutil
@@ -28,12 +27,11 @@ from . import Board, CalibrationError, calibrate
 from .bag_io import STORAGES, BagError, BagSource, TopicError
 from .calibration_file import CalibrationFileError, write_json
 from .check import check_views, load_calibration
-from .collector import AXES, CollectorConfig, ViewCollector
-from .core import depth_bias
-from .core.board import MAX_SQUARE_M, MIN_SQUARE_M
-from .image_folder import scan
+from .collector import AXES, ViewCollector
+from .image_folder import is_image_folder, scan
 from .output_folder import write_calibration
 from .replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
+from .settings import SETTINGS, calibration_options, collector_config, defaults, refusal
 from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 
 REJECTED_DIR = "rejected"  # a refused calibration's report and figures, inside --output
@@ -50,11 +48,6 @@ EXIT_CODES = {EXIT_OK: "success", EXIT_ERROR: "other error (the message says whi
               EXIT_MISSING_TOPIC: "topic missing from the bag (or ambiguous)",
               EXIT_NO_BOARD: "no board found in any frame", EXIT_TOO_FEW_VIEWS: "too few views collected",
               EXIT_QUALITY: "calibration fails the quality check (check: the calibration does not fit the data)"}
-# the node's defaults (node.PARAMETERS), so offline and live collection agree
-VIEWS_MIN, VIEWS_MAX, SLOP_S, DEPTH_SCALE, CAMERA_NAME = 8, 60, 0.02, 0.001, "tof_camera"
-EXPOSURE_S, MAX_BLUR_PX = CollectorConfig.exposure_s, CollectorConfig.max_blur_px
-# camera_info_manager accepts no other camera name (as calibration_file checks on writing)
-_CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 PLAIN_PERIOD_S = 2.0
 
 
@@ -79,33 +72,16 @@ def _board_size(text: str) -> tuple[int, int]:
     return size
 
 
-def _depth_bias(text: str) -> str:
-    try:
-        depth_bias.parse(text)
-    except CalibrationError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
-def _positive(kind: type, low: float = 0.0, high: float = math.inf, inclusive: bool = False) -> Callable[[str], float]:
-    """A number above ``low`` (or at it, ``inclusive``) and at most ``high``."""
+def _positive(kind: type) -> Callable[[str], float]:
     def parse(text: str):
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not (value >= low if inclusive else value > low):
-            raise argparse.ArgumentTypeError(f"must be {'at least' if inclusive else 'above'} {low:g}, got {text}")
-        if not value <= high:
-            raise argparse.ArgumentTypeError(f"must be at most {high:g}, got {text}")
+        if not value > 0:
+            raise argparse.ArgumentTypeError(f"must be positive, got {text}")
         return value
     return parse
-
-
-def _camera_name(text: str) -> str:
-    if not _CAMERA_NAME.fullmatch(text):
-        raise argparse.ArgumentTypeError(f"{text!r}: letters, digits and '_' only (camera_info_manager's rule)")
-    return text
 
 
 # -- progress ---------------------------------------------------------------------------------
@@ -160,16 +136,18 @@ def _board(args: argparse.Namespace) -> Board:
     return Board(args.size[0], args.size[1], args.square)
 
 
-def collector_config(views_min: int = VIEWS_MIN, views_max: int = VIEWS_MAX, stills: bool = False,
-                     exposure_s: float = EXPOSURE_S, max_blur_px: float = MAX_BLUR_PX) -> CollectorConfig:
-    """The node's collector rules."""
-    return CollectorConfig(max_views=views_max, min_views=views_min, stills=stills, exposure_s=exposure_s,
-                           max_blur_px=max_blur_px)
+def _values(args: argparse.Namespace) -> dict:
+    """The settings (settings.py) as this command line gives them; the rest at their defaults."""
+    values = defaults()
+    for name, setting in SETTINGS.items():
+        if setting.flag is not None and getattr(args, setting.flag[2:].replace("-", "_"), None) is not None:
+            values[name] = getattr(args, setting.flag[2:].replace("-", "_"))
+    return values
 
 
 def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Skip], total: int | None,
              stills: bool, image_size: tuple[int, int] | None = None) -> tuple[Summary, ViewCollector]:
-    config = collector_config(args.views_min, args.views_max, stills, args.exposure, args.max_blur)
+    config = collector_config(_values(args), stills)
     progress = Progress(total)
 
     def show(summary: Summary, collector: ViewCollector) -> None:
@@ -238,17 +216,10 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
     views = collector.views
     t0 = time.monotonic()
     try:
-        result = calibrate(views, board, summary.image_size, args.depth_convention, depth_bias=args.depth_bias)
+        result = calibrate(views, board, summary.image_size, **calibration_options(_values(args)))
     except CalibrationError as exc:
         raise Failure(EXIT_ERROR, f"calibration failed: {exc}") from None
-    seconds = time.monotonic() - t0
-    s = result.std
-    print(f"calibration ({len(result.views)} of {len(views)} views, {seconds:.1f} s): "
-          f"fx={result.K[0, 0]:.2f}±{s['fx']:.2f} fy={result.K[1, 1]:.2f}±{s['fy']:.2f} "
-          f"cx={result.K[0, 2]:.2f}±{s['cx']:.2f} cy={result.K[1, 2]:.2f}±{s['cy']:.2f} px, "
-          f"D={np.array2string(result.D, precision=4, separator=', ')}, "
-          f"depth offset {result.depth_offset * 1e3:.1f} mm; pixel RMS {result.pixel_rms:.3f} px, "
-          f"depth RMS {result.depth_rms * 1e3:.2f} mm")
+    print("calibration: " + result.summary(len(views), time.monotonic() - t0))
     driver = source.get("camera_info")
     if driver is not None:
         K = np.asarray(driver["camera_matrix"])
@@ -286,7 +257,7 @@ def _write_report(path: Path, views, board: Board, result, convention: str, titl
 # -- commands ---------------------------------------------------------------------------------
 def _bag_frames(args: argparse.Namespace, board: Board, path: Path):
     """Collect views from a bag; returns the summary, the collector and what to record of the source."""
-    with BagSource(path, amplitude=args.amplitude_topic, depth=args.depth_topic,
+    with BagSource(path, amplitude=args.amplitude_topic or None, depth=args.depth_topic or None,
                    camera_info=args.camera_info_topic, slop=args.slop, depth_scale=args.depth_scale) as bag:
         t = bag.topics
         print(f"bag: {bag.path} ({bag.storage}, {bag.frame_count} amplitude messages)")
@@ -366,7 +337,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     convention = args.depth_convention or calibration.depth_convention or "z"
     print(f"checking {calibration.source} (depth convention {convention})")
     source = Path(args.data)
-    if source.is_dir() and not (source / "metadata.yaml").exists():
+    if is_image_folder(source):
         summary, collector, _ = _folder_frames(args, board, source)
     else:
         summary, collector, _ = _bag_frames(args, board, source)
@@ -392,55 +363,61 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 # -- the command line -------------------------------------------------------------------------
+def _option(p: argparse.ArgumentParser, name: str, metavar: str | None = None, **overrides) -> None:
+    """tof_calib's option for the setting ``name`` (settings.py): the node's flag, default, check and words."""
+    setting = SETTINGS[name]
+    kind = type(setting.default)
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'a number' if kind is not str else 'text'}") from None
+        reason = setting.refusal(value)
+        if reason:
+            raise argparse.ArgumentTypeError(reason)
+        return value
+
+    default = overrides.pop("default", setting.default)
+    shown = "" if default in (None, "") else f" (default {default})"
+    p.add_argument(setting.flag, type=parse, default=default, metavar=metavar or (
+        "|".join(setting.choices) if setting.choices else "X"), help=setting.text + shown, **overrides)
+
+
 def _add_board(p: argparse.ArgumentParser, required: bool = True) -> None:
     kw = {"required": True} if required else {"default": None}
     p.add_argument("--size", type=_board_size, metavar="COLSxROWS",
                    help="interior corners, as ROS camera_calibration counts them (e.g. 5x7)",
                    **(kw if required else {"default": (5, 7)}))
-    p.add_argument("--square", type=_positive(float, MIN_SQUARE_M, MAX_SQUARE_M, inclusive=True), metavar="M",
-                   help="square size in metres",
-                   **(kw if required else {"default": 0.03}))
+    _option(p, "board.square", "M", **({"required": True, "default": None} if required else {}))
 
 
 def _add_collection(p: argparse.ArgumentParser, convention_default: str | None = "z") -> None:
-    p.add_argument("--depth-convention", choices=("z", "radial"), default=convention_default,
-                   help="depth along the optical axis (z, REP 118, Kinect) or from the optical centre "
-                        "(radial, raw PMD)" + ("" if convention_default else
-                                               "; default: the calibration.json's, else z"))
-    p.add_argument("--depth-scale", type=_positive(float, 1e-6, 10.0, inclusive=True), default=DEPTH_SCALE, metavar="M",
-                   help=f"metres per count of integer depth (default {DEPTH_SCALE}: millimetres)")
-    p.add_argument("--views-min", type=int, default=VIEWS_MIN, metavar="N",
-                   help=f"views needed to calibrate (default {VIEWS_MIN}, as the node)")
-    p.add_argument("--views-max", type=int, default=VIEWS_MAX, metavar="N",
-                   help=f"views kept at most (default {VIEWS_MAX}, as the node)")
-    p.add_argument("--exposure", type=_positive(float), default=EXPOSURE_S, metavar="S",
-                   help=f"how long a frame is exposed, all its phases (default {EXPOSURE_S} s): the board's speed "
-                        "between frames times this is its blur")
-    p.add_argument("--max-blur", type=_positive(float), default=MAX_BLUR_PX, metavar="PX",
-                   help=f"a frame whose board moved farther than this while exposed is not a view "
-                        f"(default {MAX_BLUR_PX} px, as the node)")
+    _option(p, "depth.convention", default=convention_default)
+    _option(p, "depth.scale", "M")
+    _option(p, "views.min", "N")
+    _option(p, "views.max", "N")
+    _option(p, "motion.exposure", "S")
+    _option(p, "motion.max_blur_px", "PX")
     p.add_argument("--workers", type=int, default=default_workers(), metavar="N",
                    help=f"processes looking for the board (default {default_workers()})")
 
 
 def _add_topics(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--amplitude-topic", metavar="T", help="default: the Image topic named amplitude, ir, intensity...")
-    p.add_argument("--depth-topic", metavar="T", help="default: the Image topic named depth")
+    _option(p, "bag.amplitude_topic", "T")
+    _option(p, "bag.depth_topic", "T")
     p.add_argument("--camera-info-topic", metavar="T", help="default: the CameraInfo topic (used for the image "
                                                             "size and compared with the result)")
-    p.add_argument("--slop", type=_positive(float, 0.0, 1.0, inclusive=True), default=SLOP_S, metavar="S",
-                   help=f"largest stamp difference of a paired amplitude and depth frame (default {SLOP_S} s)")
+    _option(p, "sync.slop", "S")
 
 
 def _add_calibration(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", required=True, type=Path, metavar="DIR",
                    help="where calibration.yaml, calibration.json, views/ and report.html go (for a refused "
                         "calibration: its report and figures in DIR/rejected/, nothing else changed)")
-    p.add_argument("--depth-bias", type=_depth_bias, default="offset", metavar="TERMS",
-                   help="depth error terms estimated alongside: none, or offset, scale, tilt joined by + "
-                        "(default offset; offset+tilt for drivers that compute z-depth, e.g. Kinect v2)")
-    p.add_argument("--camera-name", type=_camera_name, default=CAMERA_NAME,
-                   help=f"camera_name in calibration.yaml (default {CAMERA_NAME})")
+    for name in ("depth.bias", "calibration.distortion", "calibration.loss", "calibration.plane_squares"):
+        _option(p, name, "TERMS" if name == "depth.bias" else None)
+    _option(p, "camera_name", "NAME")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -510,11 +487,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    for name in ("views_min", "views_max", "workers"):
-        if getattr(args, name, 1) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be at least 1")
-    if getattr(args, "views_min", 0) > getattr(args, "views_max", 1):
-        parser.error("--views-min must not exceed --views-max")
+    if getattr(args, "workers", 1) < 1:
+        parser.error("--workers must be at least 1")
+    reason = refusal({name: v for name, v in _values(args).items() if name in ("views.min", "views.max")})
+    if reason:
+        parser.error(reason)
     try:
         return args.run(args)
     except Failure as exc:

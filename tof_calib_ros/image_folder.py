@@ -132,6 +132,13 @@ class FileFrame:
         return amplitude, depth_in_metres(depth, scale)
 
 
+def is_image_folder(path: Path) -> bool:
+    """A folder of image pairs rather than a rosbag2 folder (which has metadata.yaml, or at least
+    its storage files)."""
+    return (path.is_dir() and not (path / "metadata.yaml").exists()
+            and not any(path.glob("*.db3")) and not any(path.glob("*.mcap")))
+
+
 def scan(directory: str | Path, depth_scale: float = 0.001,
          n_corners: int = 0) -> tuple[list[FileFrame], list[Skip]]:
     """The folder's pairs in name order, and a Skip for each image without its partner.

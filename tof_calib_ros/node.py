@@ -15,7 +15,6 @@ dropped): the calibration could not use their views, and gets the CPU instead.
 """
 from __future__ import annotations
 
-import re
 import threading
 import time
 import traceback
@@ -36,14 +35,17 @@ from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult
-from .bag_io import BagError, BagSource
-from .calibration_file import EncodedViews, encode_views
+from .bag_io import BagError, BagFrame, BagSource
+from .board_picture import draw
+from .calibration_file import EncodedViews, encode_views, monocular_fields
 from .calibration_worker import CalibrationWorker
-from .collector import CollectorConfig, ViewCollector
+from .collector import ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
+from .image_folder import is_image_folder, scan
 from .output_folder import write_calibration
-from .replay import FrameError, Skip, decode_sized
+from .replay import FrameError, Located, Skip, decode_sized, locate_still
 from .ros_run import Executor, run
+from .settings import SETTINGS, Setting, calibration_options, collector_config, refusal
 from .stamp_sync import StampSync
 from .tracking import BoardTracker
 
@@ -52,6 +54,7 @@ COMMIT_TIMEOUT_S = 5.0
 BAG_FLAGS = {"amplitude": "parameter bag.amplitude_topic", "depth": "parameter bag.depth_topic",
              "camera_info": "tof_calib bag --camera-info-topic (the node takes the bag's only one)"}
 WARN_PERIOD_S = 5.0
+PICTURE_HZ = 5.0   # ~/board_image at most this often: for a person's eyes, not every frame
 # Requests wait here while the executor's threads are busy: with the default depth of 10, a burst
 # of calls (300 from 3 clients) lost half of them unanswered. Each one is answered, at worst with
 # "already running".
@@ -61,51 +64,20 @@ SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 # rides out those, and bounds the lag and the memory (12 MB of 640x576 16-bit pairs) when the
 # camera is faster than the search for good. Two deep, it dropped 7 % of 30 Hz 640x576 frames.
 QUEUE_PAIRS = 8
-# camera_info_manager (and so write_camera_yaml) accepts no other camera name
-CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 
 
-def _descriptor(text: str, read_only: bool = False, ints: tuple[int, int] | None = None,
-                floats: tuple[float, float] | None = None) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text, read_only=read_only)
-    if ints:
-        d.integer_range = [IntegerRange(from_value=ints[0], to_value=ints[1], step=1)]
-    if floats:
-        d.floating_point_range = [FloatingPointRange(from_value=floats[0], to_value=floats[1], step=0.0)]
+def _descriptor(setting: Setting) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=setting.text, read_only=setting.read_only)
+    if setting.low is not None and isinstance(setting.default, int) and not isinstance(setting.default, bool):
+        d.integer_range = [IntegerRange(from_value=int(setting.low), to_value=int(setting.high), step=1)]
+    elif setting.low is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(setting.low), to_value=float(setting.high),
+                                                     step=0.0)]
     return d
 
 
-# name: (default, descriptor). Board and QoS changes need a restart: they are read-only.
-PARAMETERS = {
-    "board.cols": (5, _descriptor("interior corners per row (as camera_calibration counts them)", True, (3, 100))),
-    "board.rows": (7, _descriptor("interior corners per column", True, (3, 100))),
-    "board.square": (0.03, _descriptor("square size, metres", True, floats=(0.001, 1.0))),
-    "depth.convention": ("z", _descriptor("'z' (REP 118, along the optical axis) or 'radial' (raw PMD)")),
-    "depth.scale": (0.001, _descriptor("metres per unit of 16UC1 depth (0.001: millimetres)",
-                                       floats=(1e-6, 10.0))),
-    "sync.slop": (0.02, _descriptor("largest stamp difference of a paired amplitude and depth frame, s",
-                                    floats=(0.0, 1.0))),
-    "views.min": (8, _descriptor("views needed before calibrating", ints=(3, 1000))),
-    "views.max": (60, _descriptor("views kept at most (memory stays bounded)", True, (3, 1000))),
-    "motion.exposure": (CollectorConfig.exposure_s, _descriptor(
-        "how long a frame is exposed (all its phases), s: the board's speed times this is its blur", True,
-        floats=(1e-5, 1.0))),
-    "motion.max_blur_px": (CollectorConfig.max_blur_px, _descriptor(
-        "a frame whose board moved farther than this while it was exposed is not a view, px", True,
-        floats=(0.1, 100.0))),
-    "calibration.timeout": (120.0, _descriptor(
-        "seconds a calibration may take before its worker process is taken for stuck, killed and replaced",
-        floats=(1.0, 3600.0))),
-    "camera_name": ("tof_camera", _descriptor("camera_name written into the calibration file")),
-    "output_dir": ("~/.ros/tof_calib", _descriptor("where calibration.yaml, calibration.json and views/ go")),
-    "set_camera_info_service": ("set_camera_info", _descriptor("the driver's sensor_msgs/SetCameraInfo service",
-                                                               True)),
-    "qos.reliable": (False, _descriptor("subscribe reliably instead of best effort (sensor data)", True)),
-    "bag.path": ("", _descriptor("a recording (rosbag2 folder, sqlite3 or mcap, or ROS 1 .bag) to collect views "
-                                 "from instead of the topics; calibrated once replayed", True)),
-    "bag.amplitude_topic": ("", _descriptor("the bag's amplitude topic; empty: found by type and name", True)),
-    "bag.depth_topic": ("", _descriptor("the bag's depth topic; empty: found by type and name", True)),
-}
+# name: (default, descriptor), from the settings tof_calib shares. Read-only ones need a restart.
+PARAMETERS = {name: (s.default, _descriptor(s)) for name, s in SETTINGS.items()}
 
 
 class _RateLimitedLog:
@@ -138,9 +110,9 @@ class CalibrationNode(Node):
             self.declare_parameter(name, default, desc)
         p = self._param
         self.board = Board(p("board.cols"), p("board.rows"), p("board.square"))
-        self.collector = ViewCollector(self.board, CollectorConfig(max_views=p("views.max"), min_views=p("views.min"),
-                                                                   exposure_s=p("motion.exposure"),
-                                                                   max_blur_px=p("motion.max_blur_px")))
+        # a folder of images is stills: no motion between them to judge
+        stills = bool(p("bag.path")) and is_image_folder(Path(p("bag.path")).expanduser())
+        self.collector = ViewCollector(self.board, collector_config(self._values(), stills=stills))
         self.sync = StampSync(p("sync.slop"))
         self._sync_lock = threading.Lock()     # the topics pair frames while ~/reset clears them
         self._warn = _RateLimitedLog(self.get_logger(), WARN_PERIOD_S)
@@ -175,6 +147,8 @@ class CalibrationNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.info_pub = self.create_publisher(CameraInfo, "~/camera_info", latched)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.picture_pub = self.create_publisher(Image, "~/board_image", 2)
+        self._shown = 0.0
         services = ReentrantCallbackGroup()
         for name, callback in (("~/calibrate", self._on_calibrate), ("~/reset", self._on_reset),
                                ("~/commit", self._on_commit)):
@@ -195,30 +169,20 @@ class CalibrationNode(Node):
     def _param(self, name: str):
         return self.get_parameter(name).value
 
+    def _values(self) -> dict:
+        """Every setting's current value."""
+        return {name: self._param(name) for name in SETTINGS}
+
     def _check_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """Only checks (it also runs at declaration, before the node is built); a rejected
         value must not touch the node, so ``_apply_parameters`` applies them afterwards."""
-        new = {prm.name: prm.value for prm in params}
-
-        def value(name: str):
-            return new[name] if name in new else self.get_parameter_or(name).value
-
-        for name, v in new.items():
-            reason = None
-            if name == "depth.convention" and v not in ("z", "radial"):
-                reason = f"depth.convention must be 'z' or 'radial', not {v!r}"
-            elif name == "camera_name" and not (isinstance(v, str) and CAMERA_NAME.fullmatch(v)):
-                reason = (f"camera_name must be letters, digits and '_' (camera_info_manager refuses "
-                          f"anything else), not {v!r}")
-            elif name == "output_dir" and not str(v).strip():
-                reason = "output_dir must not be empty"
-            elif name in ("views.min", "views.max"):
-                lo, hi = value("views.min"), value("views.max")
-                if lo is not None and hi is not None and lo > hi:
-                    reason = f"views.min ({lo}) must not exceed views.max ({hi}): calibration could never start"
-            if reason:
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
+        values = {prm.name: prm.value for prm in params if prm.name in SETTINGS}
+        if "views.min" in values or "views.max" in values:   # they are checked together
+            for name in ("views.min", "views.max"):
+                if name not in values and self.has_parameter(name):
+                    values[name] = self._param(name)
+        reason = refusal(values)
+        return SetParametersResult(successful=reason is None, reason=reason or "")
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         """What changes take effect beyond being read when used (the others are read per frame
@@ -293,48 +257,62 @@ class CalibrationNode(Node):
         """A decoded pair, live or replayed, to the collector."""
         # A board held still is followed from the last frames (about 1 ms) instead of searched for
         # in the whole image (10 to 90 ms): the difference between keeping up with the camera or not.
-        # A lost board is searched for thoroughly only when no frame waits (``thorough``).
-        found = self._tracker.locate(amplitude, thorough=thorough)
+        # A lost board is searched for thoroughly only when no frame waits (``thorough``). A still
+        # (a folder of images) is searched for whole, as tof_calib images does.
+        if self.collector.config.stills:
+            located = locate_still(amplitude, self.board, self.collector.config)
+        else:
+            located = Located(self._tracker.locate(amplitude, thorough=thorough))
         with self._lock:
             if generation != self._generation:
                 return
-            outcome = self.collector.add(amplitude, depth, stamp, located=found)
+            outcome = self.collector.add(amplitude, depth, stamp, located=located.found, detected=located.accurate)
         if outcome.accepted:
             self.get_logger().info(outcome.reason)
         else:
             self.last_problem = outcome.reason
+        self._show(amplitude, outcome, stamp)
+
+    def _show(self, amplitude: np.ndarray, outcome, stamp: float) -> None:
+        """~/board_image, only while someone looks, at most PICTURE_HZ times a second."""
+        now = time.monotonic()
+        if now - self._shown < 1.0 / PICTURE_HZ or self.picture_pub.get_subscription_count() == 0:
+            return
+        self._shown = now
+        with self._lock:
+            progress = self.collector.progress()
+        picture = draw(amplitude, outcome, progress)
+        msg = Image(height=picture.shape[0], width=picture.shape[1], encoding="bgr8", is_bigendian=0,
+                    step=picture.shape[1] * 3, data=picture.tobytes())
+        msg.header.stamp.sec = int(stamp)
+        msg.header.stamp.nanosec = min(int(round((stamp - int(stamp)) * 1e9)), 999_999_999)
+        msg.header.frame_id = self.frame_id
+        self.picture_pub.publish(msg)
 
     def _replay(self, path: str) -> None:
-        """Feed the collector from a bag, as fast as it reads, then calibrate as ~/calibrate would."""
+        """Feed the collector from a recording or a folder of images, as fast as it reads, then
+        calibrate as ~/calibrate would."""
         log = self.get_logger()
         p = self._param
-        frames = skipped = 0
+        source = Path(path).expanduser()
         try:
-            with BagSource(Path(path).expanduser(), amplitude=p("bag.amplitude_topic") or None,
-                           depth=p("bag.depth_topic") or None, slop=p("sync.slop"), depth_scale=p("depth.scale"),
-                           flags=BAG_FLAGS) as bag:
-                t = bag.topics
-                self.bag_topics = {"amplitude": t.amplitude, "depth": t.depth}
-                log.info(f"replaying {bag.path} ({bag.storage}, {bag.frame_count} amplitude messages): "
-                         f"amplitude {t.amplitude} ({t.how['amplitude']}), depth {t.depth} ({t.how['depth']})")
-                size = None if bag.camera_info is None else (bag.camera_info.width, bag.camera_info.height)
-                for item in bag.frames():
-                    if self._stop:
-                        return
-                    if isinstance(item, Skip):
-                        skipped += 1
-                        self._problem(item.kind, f"message skipped ({item.kind}): {item.where}: {item.reason}")
-                        continue
-                    try:
-                        amplitude, depth = decode_sized(item, size)
-                    except (FrameError, ImageError) as exc:
-                        skipped += 1
-                        self._problem(getattr(exc, "kind", "decode"), f"frame skipped: {item.where}: {exc}")
-                        continue
-                    self.frame_id = item.depth.frame_id or item.amplitude.frame_id
-                    frames += 1
-                    self._judge(amplitude, depth, item.stamp, self._generation, thorough=True)
-        except BagError as exc:
+            if is_image_folder(source):
+                frames, skips = scan(source, p("depth.scale"), self.board.n_corners)
+                if not frames:
+                    raise BagError(f"{source}: no amplitude/depth pairs (NNNN_ir.png with NNNN_depth.png)")
+                log.info(f"reading {source}: {len(frames)} image pairs, each a still")
+                counts = self._feed([*skips, *frames], None)
+            else:
+                with BagSource(source, amplitude=p("bag.amplitude_topic") or None,
+                               depth=p("bag.depth_topic") or None, slop=p("sync.slop"), depth_scale=p("depth.scale"),
+                               flags=BAG_FLAGS) as bag:
+                    t = bag.topics
+                    self.bag_topics = {"amplitude": t.amplitude, "depth": t.depth}
+                    log.info(f"replaying {bag.path} ({bag.storage}, {bag.frame_count} amplitude messages): "
+                             f"amplitude {t.amplitude} ({t.how['amplitude']}), depth {t.depth} ({t.how['depth']})")
+                    size = None if bag.camera_info is None else (bag.camera_info.width, bag.camera_info.height)
+                    counts = self._feed(bag.frames(), size)
+        except (BagError, CalibrationError, OSError) as exc:
             self._problem("replay", f"cannot replay the bag: {exc}")
             log.error(f"cannot replay the bag: {exc}")
             return
@@ -342,11 +320,35 @@ class CalibrationNode(Node):
             self._problem("replay", f"bag replay stopped: {exc!r}")
             log.error(f"bag replay stopped: {exc!r}\n{traceback.format_exc()}")
             return
+        if counts is None:   # stopped
+            return
         with self._lock:
             n = len(self.collector.views)
-        log.info(f"replayed {path}: {frames} frame pairs, {skipped} skipped, {n} views kept")
+        log.info(f"replayed {path}: {counts[0]} frame pairs, {counts[1]} skipped, {n} views kept")
         success, message = self._calibrate()
         (log.info if success else log.error)(f"calibration of the replayed bag: {message}")
+
+    def _feed(self, items, size: tuple[int, int] | None) -> tuple[int, int] | None:
+        """Each frame of a recording to the collector; (frames, skipped), or None once stopped."""
+        frames = skipped = 0
+        for item in items:
+            if self._stop:
+                return None
+            if isinstance(item, Skip):
+                skipped += 1
+                self._problem(item.kind, f"message skipped ({item.kind}): {item.where}: {item.reason}")
+                continue
+            try:
+                amplitude, depth = decode_sized(item, size)
+            except (FrameError, ImageError) as exc:
+                skipped += 1
+                self._problem(getattr(exc, "kind", "decode"), f"frame skipped: {item.where}: {exc}")
+                continue
+            if isinstance(item, BagFrame):
+                self.frame_id = item.depth.frame_id or item.amplitude.frame_id
+            frames += 1
+            self._judge(amplitude, depth, item.stamp, self._generation, thorough=True)
+        return frames, skipped
 
     def _problem(self, kind: str, text: str) -> None:
         self.last_problem = text
@@ -372,8 +374,8 @@ class CalibrationNode(Node):
             try:
                 result = self._calibrator.calibrate(views, self.board,
                                                     (views[0].depth.shape[1], views[0].depth.shape[0]),
-                                                    self._param("depth.convention"),
-                                                    timeout=self._param("calibration.timeout"))
+                                                    timeout=self._param("calibration.timeout"),
+                                                    **calibration_options(self._values()))
             except CalibrationError as exc:
                 return False, f"calibration failed: {exc}"
             except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
@@ -387,7 +389,7 @@ class CalibrationNode(Node):
                 return False, f"calibrated but not saved, nothing published: {exc}"
             self.result = result
             self.info_pub.publish(self.camera_info(result))
-            message = self._summary(result, len(views), time.monotonic() - t0)
+            message = result.summary(len(views), time.monotonic() - t0)
             self.get_logger().info(message)
             return True, message
         finally:
@@ -423,25 +425,10 @@ class CalibrationNode(Node):
             extra["topics"] = {"bag": self._param("bag.path"), **self.bag_topics}
         write_calibration(str(self._param("output_dir")), result, views, self._param("camera_name"), extra)
 
-    @staticmethod
-    def _summary(result: CalibrationResult, n_views: int, seconds: float) -> str:
-        s = result.std
-        return (f"fx={result.K[0, 0]:.2f}±{s['fx']:.2f} fy={result.K[1, 1]:.2f}±{s['fy']:.2f} "
-                f"cx={result.K[0, 2]:.2f}±{s['cx']:.2f} cy={result.K[1, 2]:.2f}±{s['cy']:.2f} px; "
-                f"pixel RMS {result.pixel_rms:.3f} px, depth RMS {result.depth_rms * 1e3:.2f} mm, "
-                f"depth offset {result.depth_offset * 1e3:.1f} mm; {len(result.views)} of {n_views} views "
-                f"used; {seconds:.1f} s")
-
     def camera_info(self, result: CalibrationResult) -> CameraInfo:
-        msg = CameraInfo()
+        msg = CameraInfo(**monocular_fields(result.K, result.D, result.image_size))
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.frame_id
-        msg.width, msg.height = int(result.image_size[0]), int(result.image_size[1])
-        msg.distortion_model = "plumb_bob"
-        msg.d = [float(x) for x in result.D]
-        msg.k = [float(x) for x in result.K.ravel()]
-        msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-        msg.p = [float(x) for x in np.hstack([result.K, np.zeros((3, 1))]).ravel()]
         return msg
 
     def _on_reset(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:

@@ -124,12 +124,18 @@ def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorCon
             out.append(Located(known, known))
             continue
         if config.stills:
-            found = quick_locate(amplitude, board, thorough=True)
-            out.append(Located(found, None if found.corners is None else
-                               accurate_detect(amplitude, board, found.corners, config.detect_in_region)))
+            out.append(locate_still(amplitude, board, config))
             continue
         out.append(Located(tracker.locate(amplitude, thorough=True)))
     return out
+
+
+def locate_still(amplitude: np.ndarray, board: Board, config: CollectorConfig) -> Located:
+    """A still's board, searched for in the whole image, and its accurate corners: the node
+    reading a folder of images does as tof_calib does."""
+    found = quick_locate(amplitude, board, thorough=True)
+    return Located(found, None if found.corners is None else
+                   accurate_detect(amplitude, board, found.corners, config.detect_in_region))
 
 
 def worker_context() -> multiprocessing.context.BaseContext:

@@ -16,7 +16,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 
 from . import Board, CalibrationError, sim
-from .calibration_file import CalibrationFileError, write_camera_yaml
+from .calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
 from .ros_run import run
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
@@ -80,15 +80,10 @@ class SimCameraNode(Node):
                 raise CalibrationError(reason)
 
     def _factory_info(self) -> CameraInfo:
-        info = CameraInfo(width=self.camera.width, height=self.camera.height, distortion_model="plumb_bob")
         K = self.camera.K.copy()
         K[0, 0] *= FACTORY_ERROR
         K[1, 1] *= FACTORY_ERROR
-        info.k = [float(x) for x in K.ravel()]
-        info.d = [0.0] * 5
-        info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-        info.p = [float(x) for x in np.hstack([K, np.zeros((3, 1))]).ravel()]
-        return info
+        return CameraInfo(**monocular_fields(K, np.zeros(5), self.camera.size))
 
     def _tick(self) -> None:
         rvec, tvec = self.poses[(self.frame // self.hold) % len(self.poses)]

@@ -70,6 +70,7 @@ def _call_async(spinner: Spinner, name: str):
     return wait
 
 
+@pytest.mark.slow
 def test_commit_reports_an_absent_failing_or_slow_driver(launch, spinner, ros, tmp_path):
     ns = "/f1"
     procs = _start(launch, ns, tmp_path / "out", "-p", f"set_camera_info_service:={ns}/fake_driver")
@@ -179,6 +180,7 @@ def test_sigkill_while_writing_keeps_the_previous_files(launch, spinner, tmp_pat
     assert n_after == n_before   # the old views, not a part of the new ones
 
 
+@pytest.mark.slow
 def test_soak_under_load_and_faults(ros, tmp_path):
     """benchmarks/reliability.py's soak, shorter outside CI (TOF_CALIB_SOAK_MINUTES overrides):
     every call answered (a burst of 300 at once among them), no file damaged, no NaN published,
@@ -188,7 +190,7 @@ def test_soak_under_load_and_faults(ros, tmp_path):
     import sys
 
     minutes = float(os.environ.get("TOF_CALIB_SOAK_MINUTES", "10" if os.environ.get("CI") else "1"))
-    script = Path(__file__).resolve().parents[1] / "benchmarks" / "reliability.py"
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "reliability.py"
     report = tmp_path / "reliability.json"
     env, _ = ros
     env = {k: v for k, v in env.items() if k != "ROS_DOMAIN_ID"}   # its own domain
@@ -212,7 +214,8 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     from hypothesis import strategies as st
     from rcl_interfaces.srv import GetParameters
 
-    from tof_calib_ros.node import CAMERA_NAME, PARAMETERS
+    from tof_calib_ros.node import PARAMETERS
+    from tof_calib_ros.settings import CAMERA_NAME
 
     node = launch("calibration_node", "-r", "__ns:=/f4")
     procs = (node,)
@@ -246,6 +249,7 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     assert resp.success
 
 
+@pytest.mark.slow
 def test_the_calibration_worker_killed_is_reported_and_replaced(launch, spinner, tmp_path):
     """The calibration runs in a worker process: a crash there (here a SIGKILL) costs that one
     calibration, said in the answer; the node, its views and the next calibration go on."""

@@ -94,6 +94,17 @@ class CalibrationResult:
     def ok(self) -> bool:
         return not self.verdict
 
+    def summary(self, n_views: int, seconds: float) -> str:
+        """One line for a person: the intrinsics with their standard deviations, the distortion,
+        the residuals, the views used of ``n_views`` given and the time taken. The node's
+        answer, the CLI's output and the demo all print this."""
+        s = self.std
+        return (f"fx={self.K[0, 0]:.2f}±{s['fx']:.2f} fy={self.K[1, 1]:.2f}±{s['fy']:.2f} "
+                f"cx={self.K[0, 2]:.2f}±{s['cx']:.2f} cy={self.K[1, 2]:.2f}±{s['cy']:.2f} px; "
+                f"D=[{', '.join(f'{d:.4g}' for d in self.D)}]; pixel RMS {self.pixel_rms:.3f} px, "
+                f"depth RMS {self.depth_rms * 1e3:.2f} mm, depth offset {self.depth_offset * 1e3:.1f} mm; "
+                f"{len(self.views)} of {n_views} views used; {seconds:.1f} s")
+
     def to_dict(self) -> dict:
         """Everything the result holds, as plain JSON-ready types."""
         return {
