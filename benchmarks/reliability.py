@@ -98,17 +98,6 @@ def _files_whole(out: Path) -> bool:
     return bool(np.all(np.isfinite(K)) and doc["verdict"]["ok"])
 
 
-def _answered(client, timeout: float) -> bool:
-    from std_srvs.srv import Trigger
-
-    future, done = client.call_async(Trigger.Request()), threading.Event()
-    future.add_done_callback(lambda _f: done.set())
-    if done.wait(timeout):
-        return True
-    client.remove_pending_request(future)
-    return False
-
-
 def soak(minutes: float, seed: int = 0, log=print) -> dict:
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -116,6 +105,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     from std_srvs.srv import Trigger
 
     from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, tree_rss_mb, wait_until
+    from tof_calib_ros.ros_processes import answered as is_answered
 
     rnd = random.Random(seed)
     env = ros_environment()
@@ -162,7 +152,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         wait_until(lambda: amplitude_pub.get_subscription_count() > 0, 30.0, "the node's subscriptions", *procs)
 
         for client in burst_clients:   # answered once each first, as above
-            wait_until(lambda c=client: _answered(c, 5.0), 60.0, "a burst client's first answer", *procs)
+            wait_until(lambda c=client: is_answered(c, 5.0), 60.0, "a burst client's first answer", *procs)
 
         def call(service: str, client=None) -> threading.Event:
             """Send one call; the returned event is set when it is answered and checked."""

@@ -197,6 +197,20 @@ class Spinner:
         self._thread.join(timeout=5.0)
 
 
+def answered(client: Any, timeout: float) -> bool:
+    """Whether a std_srvs/Trigger call through ``client`` is answered within ``timeout`` s (a
+    client's first answers can be lost to discovery: see ``Spinner.call``); an unanswered call
+    is withdrawn."""
+    from std_srvs.srv import Trigger
+
+    future, done = client.call_async(Trigger.Request()), threading.Event()
+    future.add_done_callback(lambda _f: done.set())
+    if done.wait(timeout):
+        return True
+    client.remove_pending_request(future)
+    return False
+
+
 def wait_until(condition: Callable[[], Any], timeout: float, what: str | Callable[[], str], *procs: NodeProcess,
                period: float = 0.05) -> Any:
     """Poll ``condition`` until it returns something true; raise with ``what`` (or what it returns

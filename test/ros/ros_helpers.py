@@ -20,6 +20,7 @@ from tof_calib_ros.ros_processes import (  # noqa: E402, F401
     NotInstalled,
     RosProcessError,
     Spinner,
+    answered,
     logs,
     ros_environment,
 )

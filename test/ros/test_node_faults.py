@@ -25,7 +25,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
 
-from ros_helpers import RESEND_S, START_TIMEOUT_S, Spinner, logs, set_parameter, wait_until  # noqa: E402
+from ros_helpers import RESEND_S, START_TIMEOUT_S, Spinner, answered, logs, set_parameter, wait_until  # noqa: E402
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -223,17 +223,17 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     values = st.one_of(st.integers(-2**63, 2**63 - 1), st.floats(allow_nan=True, allow_infinity=True),
                        st.text(max_size=30), st.booleans(), st.sampled_from(["z", "radial", "x_1", "/tmp/o"]),
                        st.lists(st.integers(-5, 5), max_size=3))
-    answered = {"ok": 0, "refused": 0}
+    outcomes = {"ok": 0, "refused": 0}
 
     @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
     @given(name=names, value=values)
     def check(name, value):
         ok, reason = set_parameter(spinner, "/f4/calibration_node", name, value, procs)
-        answered["ok" if ok else "refused"] += 1
+        outcomes["ok" if ok else "refused"] += 1
         assert ok or reason, f"{name}={value!r} refused without a reason"
 
     check()
-    assert node.alive() and answered["ok"] > 0 and answered["refused"] > 0, answered
+    assert node.alive() and outcomes["ok"] > 0 and outcomes["refused"] > 0, outcomes
     req = GetParameters.Request(names=list(PARAMETERS))
     got = spinner.call(GetParameters, "/f4/calibration_node/get_parameters", req,
                        procs=procs, resend_after=RESEND_S).values
@@ -305,7 +305,7 @@ def test_a_burst_of_calls_from_three_clients_is_answered_whole(launch, spinner, 
         depth=1000, reliability=ReliabilityPolicy.RELIABLE)) for _ in range(3)]
     for client in clients:   # each client's first answer may be lost to discovery (Spinner.call): warm it
         assert client.wait_for_service(timeout_sec=START_TIMEOUT_S), logs(node)
-        wait_until(lambda c=client: _answered(c, 2.0), START_TIMEOUT_S, "a first answer", node)
+        wait_until(lambda c=client: answered(c, 2.0), START_TIMEOUT_S, "a first answer", node)
     futures = [client.call_async(Trigger.Request()) for client in clients for _ in range(100)]
     wait_until(lambda: all(f.done() for f in futures), 60.0,
                lambda: f"{sum(not f.done() for f in futures)} of 300 calls unanswered", node)
@@ -313,13 +313,6 @@ def test_a_burst_of_calls_from_three_clients_is_answered_whole(launch, spinner, 
     assert node.proc.poll() is None
 
 
-def _answered(client, timeout: float) -> bool:
-    future, done = client.call_async(Trigger.Request()), threading.Event()
-    future.add_done_callback(lambda _f: done.set())
-    if done.wait(timeout):
-        return True
-    client.remove_pending_request(future)
-    return False
 
 
 def test_malformed_frames_of_every_size_give_a_few_warnings(launch, spinner, tmp_path):
