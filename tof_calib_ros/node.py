@@ -15,6 +15,7 @@ dropped): the calibration could not use their views, and gets the CPU instead.
 """
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 import traceback
@@ -39,11 +40,11 @@ from .bag_io import BagError, BagFrame, BagSource
 from .board_picture import draw
 from .calibration_file import EncodedViews, encode_views, monocular_fields
 from .calibration_worker import CalibrationWorker
-from .collector import ViewCollector
+from .collector import Outcome, ViewCollector
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .image_folder import is_image_folder, scan
 from .output_folder import write_calibration
-from .replay import FrameError, Located, Skip, decode_sized, locate_still
+from .replay import Replay, Summary
 from .ros_run import Executor, run
 from .settings import SETTINGS, Setting, calibration_options, collector_config, refusal
 from .stamp_sync import StampSync
@@ -254,19 +255,19 @@ class CalibrationNode(Node):
 
     def _judge(self, amplitude: np.ndarray, depth: np.ndarray, stamp: float, generation: int,
                thorough: bool) -> None:
-        """A decoded pair, live or replayed, to the collector."""
+        """A decoded pair from the topics to the collector."""
         # A board held still is followed from the last frames (about 1 ms) instead of searched for
         # in the whole image (10 to 90 ms): the difference between keeping up with the camera or not.
-        # A lost board is searched for thoroughly only when no frame waits (``thorough``). A still
-        # (a folder of images) is searched for whole, as tof_calib images does.
-        if self.collector.config.stills:
-            located = locate_still(amplitude, self.board, self.collector.config)
-        else:
-            located = Located(self._tracker.locate(amplitude, thorough=thorough))
+        # A lost board is searched for thoroughly only when no frame waits (``thorough``).
+        found = self._tracker.locate(amplitude, thorough=thorough)
         with self._lock:
             if generation != self._generation:
                 return
-            outcome = self.collector.add(amplitude, depth, stamp, located=located.found, detected=located.accurate)
+            outcome = self.collector.add(amplitude, depth, stamp, located=found)
+        self._judged(amplitude, outcome, stamp)
+
+    def _judged(self, amplitude: np.ndarray, outcome: Outcome, stamp: float) -> None:
+        """What follows a frame's judgement, live or replayed: the log, the diagnostics, the picture."""
         if outcome.accepted:
             self.get_logger().info(outcome.reason)
         else:
@@ -290,18 +291,30 @@ class CalibrationNode(Node):
         self.picture_pub.publish(msg)
 
     def _replay(self, path: str) -> None:
-        """Feed the collector from a recording or a folder of images, as fast as it reads, then
-        calibrate as ~/calibrate would."""
+        """Feed the collector from a recording or a folder of images, as fast as it reads, through
+        tof_calib's own replay (``replay.Replay``), then calibrate as ~/calibrate would."""
         log = self.get_logger()
         p = self._param
         source = Path(path).expanduser()
+
+        def replay(items, size: tuple[int, int] | None) -> Summary:
+            def judged(frame, amplitude: np.ndarray, outcome: Outcome) -> None:
+                if isinstance(frame, BagFrame):
+                    self.frame_id = frame.depth.frame_id or frame.amplitude.frame_id
+                self._judged(amplitude, outcome, frame.stamp)
+
+            run = Replay(self.board, self.collector.config, image_size=size, collector=self.collector,
+                         lock=self._lock, on_outcome=judged,
+                         on_skip=lambda s: self._problem(s.kind, f"skipped ({s.kind}): {s.where}: {s.reason}"))
+            return run.run(itertools.takewhile(lambda _item: not self._stop, items))
+
         try:
             if is_image_folder(source):
                 frames, skips = scan(source, p("depth.scale"), self.board.n_corners)
                 if not frames:
                     raise BagError(f"{source}: no amplitude/depth pairs (NNNN_ir.png with NNNN_depth.png)")
                 log.info(f"reading {source}: {len(frames)} image pairs, each a still")
-                counts = self._feed([*skips, *frames], None)
+                summary = replay([*skips, *frames], None)
             else:
                 with BagSource(source, amplitude=p("bag.amplitude_topic") or None,
                                depth=p("bag.depth_topic") or None, slop=p("sync.slop"), depth_scale=p("depth.scale"),
@@ -311,7 +324,7 @@ class CalibrationNode(Node):
                     log.info(f"replaying {bag.path} ({bag.storage}, {bag.frame_count} amplitude messages): "
                              f"amplitude {t.amplitude} ({t.how['amplitude']}), depth {t.depth} ({t.how['depth']})")
                     size = None if bag.camera_info is None else (bag.camera_info.width, bag.camera_info.height)
-                    counts = self._feed(bag.frames(), size)
+                    summary = replay(bag.frames(), size)
         except (BagError, CalibrationError, OSError) as exc:
             self._problem("replay", f"cannot replay the bag: {exc}")
             log.error(f"cannot replay the bag: {exc}")
@@ -320,35 +333,14 @@ class CalibrationNode(Node):
             self._problem("replay", f"bag replay stopped: {exc!r}")
             log.error(f"bag replay stopped: {exc!r}\n{traceback.format_exc()}")
             return
-        if counts is None:   # stopped
+        if self._stop:
             return
         with self._lock:
             n = len(self.collector.views)
-        log.info(f"replayed {path}: {counts[0]} frame pairs, {counts[1]} skipped, {n} views kept")
+        log.info(f"replayed {path}: {summary.frames} frame pairs, {sum(summary.skipped.values())} skipped, "
+                 f"{n} views kept")
         success, message = self._calibrate()
         (log.info if success else log.error)(f"calibration of the replayed bag: {message}")
-
-    def _feed(self, items, size: tuple[int, int] | None) -> tuple[int, int] | None:
-        """Each frame of a recording to the collector; (frames, skipped), or None once stopped."""
-        frames = skipped = 0
-        for item in items:
-            if self._stop:
-                return None
-            if isinstance(item, Skip):
-                skipped += 1
-                self._problem(item.kind, f"message skipped ({item.kind}): {item.where}: {item.reason}")
-                continue
-            try:
-                amplitude, depth = decode_sized(item, size)
-            except (FrameError, ImageError) as exc:
-                skipped += 1
-                self._problem(getattr(exc, "kind", "decode"), f"frame skipped: {item.where}: {exc}")
-                continue
-            if isinstance(item, BagFrame):
-                self.frame_id = item.depth.frame_id or item.amplitude.frame_id
-            frames += 1
-            self._judge(amplitude, depth, item.stamp, self._generation, thorough=True)
-        return frames, skipped
 
     def _problem(self, kind: str, text: str) -> None:
         self.last_problem = text

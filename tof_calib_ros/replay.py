@@ -20,6 +20,7 @@ import os
 import re
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -131,8 +132,7 @@ def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorCon
 
 
 def locate_still(amplitude: np.ndarray, board: Board, config: CollectorConfig) -> Located:
-    """A still's board, searched for in the whole image, and its accurate corners: the node
-    reading a folder of images does as tof_calib does."""
+    """A still's board, searched for in the whole image, and its accurate corners."""
     found = quick_locate(amplitude, board, thorough=True)
     return Located(found, None if found.corners is None else
                    accurate_detect(amplitude, board, found.corners, config.detect_in_region))
@@ -215,44 +215,59 @@ class Replay:
 
     ``image_size`` (width, height), when known (from camera_info), is what every frame must
     have; otherwise the first decoded frame sets it. ``progress`` is called after every frame
-    with the summary and the collector. With more than one worker, the workers are started as
+    with the summary and the collector. The node replays a recording through this too: into its
+    own ``collector``, under the ``lock`` its services read the views with, hearing of each
+    frame's ``on_outcome`` and each ``on_skip``. With more than one worker, the workers are started as
     fresh processes (``worker_context``), which import the calling script's main module: a script that
     runs a replay must do so under ``if __name__ == "__main__":``, as multiprocessing requires.
     """
 
     def __init__(self, board: Board, config: CollectorConfig, *, workers: int = 1,
                  image_size: tuple[int, int] | None = None,
-                 progress: Callable[[Summary, ViewCollector], None] | None = None) -> None:
+                 progress: Callable[[Summary, ViewCollector], None] | None = None,
+                 collector: ViewCollector | None = None, lock: AbstractContextManager | None = None,
+                 on_outcome: Callable[[Frame, np.ndarray, Outcome], None] | None = None,
+                 on_skip: Callable[[Skip], None] | None = None) -> None:
         if workers < 1:
             raise CalibrationError(f"workers must be at least 1, got {workers}")
         self.board = board
-        self.collector = ViewCollector(board, config)
+        # the node replays into its own collector, under the lock its services read it with
+        self.collector = ViewCollector(board, config) if collector is None else collector
+        self._lock = lock or nullcontext()
         self.workers = workers
         self.summary = Summary(image_size=image_size)
         self._progress = progress or (lambda _s, _c: None)
+        self._on_outcome = on_outcome or (lambda _f, _a, _o: None)
+        self._on_skip = on_skip or (lambda _s: None)
 
     def run(self, frames: Iterable[Frame | Skip]) -> Summary:
         for frame, result in self._located(frames):
             if isinstance(result, Skip):
-                self.summary.skip(replace(result, where=frame.where))
+                self._skip(replace(result, where=frame.where))
             else:
                 self._judge(frame, result)
             self._progress(self.summary, self.collector)
         return self.summary
+
+    def _skip(self, skip: Skip) -> None:
+        self.summary.skip(skip)
+        self._on_skip(skip)
 
     def _judge(self, frame: Frame, located: Located) -> None:
         s = self.summary
         try:
             amplitude, depth = decode_sized(frame, s.image_size)
         except FrameError as exc:
-            s.skip(Skip(exc.kind, frame.where, str(exc)))
+            self._skip(Skip(exc.kind, frame.where, str(exc)))
             return
         if s.image_size is None:
             s.image_size = (depth.shape[1], depth.shape[0])
         s.frames += 1
         s.boards += located.found.corners is not None
-        outcome: Outcome = self.collector.add(amplitude, depth, frame.stamp, located=located.found,
-                                              detected=located.accurate)
+        with self._lock:
+            outcome: Outcome = self.collector.add(amplitude, depth, frame.stamp, located=located.found,
+                                                  detected=located.accurate)
+        self._on_outcome(frame, amplitude, outcome)
         if outcome.accepted:
             s.view_stamps = self.collector.stamps
         else:
