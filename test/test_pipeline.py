@@ -1,4 +1,6 @@
 """The whole depth-aided calibration against the renderer's ground truth, and its refusals."""
+import re
+
 import numpy as np
 import pytest
 
@@ -177,3 +179,16 @@ def test_a_wrong_square_size_or_depth_unit_is_not_trusted(square, depth_factor, 
     assert abs(res.K[0, 0] / CAM.params[0] - 1) > 0.1
     assert not res.ok and any(reason in r for r in res.verdict), res.verdict
     assert res.to_dict()["corner_only_focal"]["fx"] == pytest.approx(CAM.params[0], rel=0.01)
+
+
+@pytest.mark.parametrize("factor", [1.1, 1 / 1.2, 0.9])
+def test_a_square_a_tenth_off_is_refused_saying_which_way(factor):
+    """Not a fixed 25 %: the depth-aided and corner-only focal lengths are compared with the
+    standard deviations of their difference (a square 18 % off was once trusted at 140 of them)."""
+    views, _ = _scene(8, 11, noise=sim.Noise(depth=0.002))
+    res = calibrate(views, Board(BOARD.cols, BOARD.rows, BOARD.square * factor))
+    assert not res.ok, f"a square {factor - 1:+.0%} off was trusted: {res.K[0, 0]:.1f}"
+    reason = next(r for r in res.verdict if "the corners alone give fx=" in r)
+    # a square given too small makes the depth-aided focal length longer: the squares look larger
+    assert f"the squares look {'larger' if factor < 1 else 'smaller'} than the size given" in reason, reason
+    assert int(re.search(r"(\d+) standard deviations", reason)[1]) > 5, reason
