@@ -55,13 +55,9 @@ def storage_files(path: Path, suffix: str) -> list[Path]:
     return sorted(path.glob(f"*{suffix}"))
 
 
-class McapSalvage:
-    """Reads a bag's MCAP files record by record, as far as they go.
-
-    ``cut`` says where reading stopped early ("file.mcap: ..."), or is None when every file
-    ended as MCAP files end. Opening reads the files once (to learn the topics and count the
-    messages); ``messages`` reads them again.
-    """
+class _Salvage:
+    """What both readers give ``BagSource``: ``connections``, ``topics`` (with their message
+    counts), ``deserialize`` and ``cut``, the reason reading stopped early (None: it did not)."""
 
     is2 = True
 
@@ -71,16 +67,30 @@ class McapSalvage:
         self.connections: list[Connection] = []
         self.topics: dict[str, TopicInfo] = {}
         self.cut: str | None = None
-        counts: dict[int, int] = {}
-        for _file, record in self._records():
-            if isinstance(record, Message):
-                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+
+    def _count(self, counts: dict[int, int]) -> None:
+        """``topics`` from the messages counted per connection id."""
         for conn in self.connections:
             info = self.topics.setdefault(conn.topic, TopicInfo(conn.msgtype, 0))
             info.msgcount += counts.get(conn.id, 0)
 
-    def _records(self) -> Iterator[tuple[Path, Any]]:
-        """(file, record) of every schema, channel and message, up to the first damage."""
+    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        return self.typestore.deserialize_cdr(raw, msgtype)
+
+
+class McapSalvage(_Salvage):
+    """Reads a bag's MCAP files record by record, as far as they go. Opening reads the files
+    once (to learn the topics and count the messages); ``messages`` reads them again."""
+
+    def __init__(self, files: Iterable[Path]) -> None:
+        super().__init__(files)
+        counts: dict[int, int] = {}
+        for record in self._records():
+            counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+        self._count(counts)
+
+    def _records(self) -> Iterator[Message]:
+        """Every message up to the first damage, learning the schemas and channels on the way."""
         schemas: dict[int, Schema] = {}
         known = {c.id for c in self.connections}
         for file in self.files:
@@ -95,7 +105,7 @@ class McapSalvage:
                             self.connections.append(
                                 Connection(record.id, record.topic, schemas[record.schema_id].name))
                         elif isinstance(record, Message):
-                            yield file, record
+                            yield record
                 except Exception as exc:  # noqa: BLE001 - a cut shows as many kinds of error
                     self.cut = f"{file.name}: {type(exc).__name__}: {' '.join(str(exc).split())}"[:200]
                     return
@@ -111,32 +121,23 @@ class McapSalvage:
 
     def messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, bytes]]:
         by_id = {c.id: c for c in connections}
-        for _file, record in self._records():
+        for record in self._records():
             conn = by_id.get(record.channel_id)
             if conn is not None:
                 yield conn, record.log_time, record.data
-
-    def deserialize(self, raw: bytes, msgtype: str) -> Any:
-        return self.typestore.deserialize_cdr(raw, msgtype)
 
     def close(self) -> None:
         pass
 
 
-class SqliteSalvage:
-    """Reads the rows of a bag's sqlite3 files from their whole table leaf pages.
-
-    ``cut`` says what could not be read ("file.db3: ..."), or is None. Opening scans the pages
-    once for the topics and an index of the messages (file, page, cell; not their data), which
-    ``messages`` then reads in timestamp order.
-    """
-
-    is2 = True
+class SqliteSalvage(_Salvage):
+    """Reads the rows of a bag's sqlite3 files from their whole table leaf pages. Opening scans
+    the pages once for the topics and an index of the messages (file, page, cell; not their
+    data), which ``messages`` then reads in timestamp order."""
 
     def __init__(self, files: Iterable[Path]) -> None:
-        self.files = list(files)
-        self.typestore = get_typestore(Stores.ROS2_JAZZY)
-        self.cut: str | None = None
+        super().__init__(files)
+        cuts = []
         topics: dict[int, tuple[str, str]] = {}
         found: dict[int, tuple[int, int, int, int, int]] = {}   # rowid -> (timestamp, topic, file, page, cell)
         self._pages: list[_Pages] = []
@@ -145,7 +146,7 @@ class SqliteSalvage:
             pages = _Pages(file)
             self._pages.append(pages)
             if pages.torn:
-                self.cut = f"{file.name}: the file ends inside page {pages.count + 1}"
+                cuts.append(f"{file.name}: the file ends inside page {pages.count + 1}")
             for page in range(1, pages.count + 1):
                 for cell in pages.leaf_cells(page):
                     row = pages.row(page, cell, with_blob=False)
@@ -158,16 +159,14 @@ class SqliteSalvage:
                     elif _is_message(values):
                         found[(k << 48) | rowid] = (values[2], values[1], k, page, cell)
         if lost:
-            self.cut = (self.cut or "") + f"; {lost} rows reach past the end"
+            cuts.append(f"{lost} rows reach past the end")
+        self.cut = "; ".join(cuts) or None
         self.connections = [Connection(i, name, msgtype) for i, (name, msgtype) in sorted(topics.items())]
         self._index = sorted(found.values())
-        self.topics: dict[str, TopicInfo] = {}
         counts: dict[int, int] = {}
         for _stamp, topic, *_ in self._index:
             counts[topic] = counts.get(topic, 0) + 1
-        for conn in self.connections:
-            info = self.topics.setdefault(conn.topic, TopicInfo(conn.msgtype, 0))
-            info.msgcount += counts.get(conn.id, 0)
+        self._count(counts)
 
     def messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, bytes]]:
         by_id = {c.id: c for c in connections}
@@ -177,9 +176,6 @@ class SqliteSalvage:
                 row = self._pages[k].row(page, cell, with_blob=True)
                 if row is not None:
                     yield conn, stamp, row[1][3]
-
-    def deserialize(self, raw: bytes, msgtype: str) -> Any:
-        return self.typestore.deserialize_cdr(raw, msgtype)
 
     def close(self) -> None:
         for pages in self._pages:

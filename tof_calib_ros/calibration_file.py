@@ -71,12 +71,7 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
             os.fsync(f.fileno())
         os.replace(tmp, path)
         created = False
-        if hasattr(os, "O_DIRECTORY"):   # POSIX; Windows cannot open a directory
-            dir_fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
-            try:
-                os.fsync(dir_fd)
-            finally:
-                os.close(dir_fd)
+        sync_dir(path.parent)
     except BaseException as exc:
         if created:
             tmp.unlink(missing_ok=True)
@@ -84,6 +79,17 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
             raise CalibrationFileError(f"cannot write {path}: {exc.strerror or exc}") from exc
         raise
     return path
+
+
+def sync_dir(path: Path) -> None:
+    """Flush a directory's entries, so that a rename in it survives a power cut."""
+    if not hasattr(os, "O_DIRECTORY"):   # POSIX; Windows cannot open a directory
+        return
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _matrix(rows: int, cols: int, values) -> dict:

@@ -140,8 +140,9 @@ def _values(args: argparse.Namespace) -> dict:
     """The settings (settings.py) as this command line gives them; the rest at their defaults."""
     values = defaults()
     for name, setting in SETTINGS.items():
-        if setting.flag is not None and getattr(args, setting.flag[2:].replace("-", "_"), None) is not None:
-            values[name] = getattr(args, setting.flag[2:].replace("-", "_"))
+        given = None if setting.flag is None else getattr(args, setting.flag[2:].replace("-", "_"), None)
+        if given is not None:
+            values[name] = given
     return values
 
 
@@ -215,8 +216,9 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
                          source: dict) -> int:
     views = collector.views
     t0 = time.monotonic()
+    options = calibration_options(_values(args))
     try:
-        result = calibrate(views, board, summary.image_size, **calibration_options(_values(args)))
+        result = calibrate(views, board, summary.image_size, **options)
     except CalibrationError as exc:
         raise Failure(EXIT_ERROR, f"calibration failed: {exc}") from None
     print("calibration: " + result.summary(len(views), time.monotonic() - t0))
@@ -235,12 +237,12 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
         # what went wrong, beside (never over) an earlier good calibration
         rejected.mkdir(exist_ok=True)
         written = [write_json(rejected / "calibration.json", result, extra),
-                   _write_report(rejected / "report.html", views, board, result, args.depth_convention, source["path"])]
+                   _write_report(rejected / "report.html", views, board, result, options, source["path"])]
         print("wrote " + ", ".join(str(p) for p in written))
         raise Failure(EXIT_QUALITY, f"calibration not trusted, nothing in {out} changed: " + "; ".join(result.verdict))
     try:
         yaml_path = write_calibration(out, result, views, args.camera_name, extra, report=lambda path: _write_report(
-            path, views, board, result, args.depth_convention, source["path"]))
+            path, views, board, result, options, source["path"]))
     except CalibrationFileError as exc:
         raise Failure(EXIT_ERROR, str(exc)) from None
     shutil.rmtree(rejected, ignore_errors=True)   # an earlier refusal's: this result replaces it
@@ -249,9 +251,11 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
     return EXIT_OK
 
 
-def _write_report(path: Path, views, board: Board, result, convention: str, title: str) -> Path:
+def _write_report(path: Path, views, board: Board, result, options: dict, title: str) -> Path:
+    """The report of ``result``, calibrating again with the ``options`` it was calibrated with."""
     from .report import write_report  # matplotlib is imported only when a report is written
-    return write_report(path, views, board, result, depth_convention=convention, title=f"tof_calib: {title}")
+    return write_report(path, views, board, result, depth_convention=options["depth_convention"],
+                        loss=options["loss"], title=f"tof_calib: {title}")
 
 
 # -- commands ---------------------------------------------------------------------------------

@@ -491,9 +491,8 @@ class CalibrationNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run("calibration_node", CalibrationNode, __doc__,
-               {name: (default, desc.description) for name, (default, desc) in PARAMETERS.items()}, args,
-               executor=lambda: Executor(num_threads=4))
+    usage = {name: (s.default, s.text) for name, s in SETTINGS.items()}
+    return run("calibration_node", CalibrationNode, __doc__, usage, args, executor=lambda: Executor(num_threads=4))
 
 
 if __name__ == "__main__":

@@ -39,6 +39,7 @@ from .calibration_file import (
     camera_yaml,
     encode_views,
     save_views,
+    sync_dir,
     write_json,
 )
 from .core.pipeline import View
@@ -127,7 +128,7 @@ def _point(link: Path, target: str, token: str) -> None:
     tmp = link.with_name(f".{link.name}.{token}")
     os.symlink(target, tmp)
     os.replace(tmp, link)
-    _sync_dir(link.parent)
+    sync_dir(link.parent)
 
 
 def _link_members(out: Path, token: str) -> None:
@@ -150,9 +151,7 @@ def _adopt_legacy(out: Path, token: str) -> None:
     plain = [m for m in MEMBERS if (out / m).exists() and not (out / m).is_symlink()]
     if (out / CURRENT).exists() and not (out / CURRENT).is_symlink():
         # a copy that followed the links (shutil.copytree's default): the plain names hold the set
-        aside = out / f".{CURRENT}.legacy.{token}"
-        os.rename(out / CURRENT, aside)
-        shutil.rmtree(aside, ignore_errors=True)
+        _drop(out / CURRENT, token)
     if not plain:
         return
     name = f"00000000T000000-legacy.{token}"
@@ -166,9 +165,7 @@ def _adopt_legacy(out: Path, token: str) -> None:
     for member in plain:
         path = out / member
         if path.is_dir():
-            aside = out / f".{member}.legacy.{token}"
-            os.rename(path, aside)
-            shutil.rmtree(aside, ignore_errors=True)
+            _drop(path, token)
         _point(path, f"{CURRENT}/{member}", token)
 
 
@@ -194,23 +191,19 @@ def _collect(out: Path, keep: set[str | None]) -> None:
 def _alive_writer(token: str) -> bool:
     """Whether the process whose ``<pid>.<random>`` token this is still runs (this host)."""
     pid = token.split(".")[0]
-    return pid.isdigit() and _alive(int(pid))
-
-
-def _alive(pid: int) -> bool:
+    if not pid.isdigit():
+        return False
     try:
-        os.kill(pid, 0)
+        os.kill(int(pid), 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except PermissionError:   # another user's: alive
+        pass
     return True
 
 
-def _sync_dir(path: Path) -> None:
-    """So that a rename survives a power cut."""
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+def _drop(path: Path, token: str) -> None:
+    """Remove a folder by first renaming it aside (one step for a reader), then deleting it."""
+    aside = path.with_name(f".{path.name}.legacy.{token}")
+    os.rename(path, aside)
+    shutil.rmtree(aside, ignore_errors=True)
