@@ -84,7 +84,9 @@ class Noise:
     is a systematic bias (a Kinect v2 reads about +25 mm). The wiggling error is
     ``wiggle_amplitude * sin(2 pi d / wiggle_period + wiggle_phase)`` of the true depth ``d`` in
     the frame's convention. ``invalid_fraction`` of pixels, drawn at random, lose their depth.
-    ``amplitude`` is the amplitude standard deviation as a fraction of full scale.
+    ``amplitude`` is the amplitude standard deviation as a fraction of full scale. ``dark_offset``
+    (m): dark surfaces read farther, by this much times (1 - albedo / white's), as real ToF
+    cameras read the black squares (about 0.89 of it on a black square).
     """
 
     depth: float = 0.0
@@ -95,6 +97,7 @@ class Noise:
     wiggle_phase: float = 0.0
     invalid_fraction: float = 0.0
     amplitude: float = 0.0
+    dark_offset: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("depth", "depth_const", "wiggle_amplitude", "amplitude"):
@@ -106,8 +109,8 @@ class Noise:
         if not (0.0 <= self.invalid_fraction <= 1.0):
             raise CalibrationError(
                 f"invalid fraction must be in [0, 1], got {self.invalid_fraction}")
-        if not (np.isfinite(self.offset) and np.isfinite(self.wiggle_phase)):
-            raise CalibrationError("noise offset and wiggle phase must be finite")
+        if not (np.isfinite(self.offset) and np.isfinite(self.wiggle_phase) and np.isfinite(self.dark_offset)):
+            raise CalibrationError("noise offset, dark offset and wiggle phase must be finite")
 
 
 @dataclass
@@ -258,8 +261,8 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
     if not (np.isnan(invalid) or invalid == 0):
         raise CalibrationError(f"invalid depth must be NaN or 0, got {invalid}")
     if moving_to is None:
-        amp, depth_true, cov = _surfaces(camera, board, rvec, tvec, conv, border, background, flying_pixels, S,
-                                         reflectivity)
+        amp, depth_true, cov, albedo = _surfaces(camera, board, rvec, tvec, conv, border, background,
+                                                 flying_pixels, S, reflectivity)
         pose = (np.asarray(rvec, dtype=float).reshape(3), np.asarray(tvec, dtype=float).reshape(3))
     else:
         n = PHASES * INSTANTS
@@ -267,10 +270,11 @@ def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, 
                               background, flying_pixels, S, reflectivity) for k in range(n)]
         samples = [_integrate(instants[k * INSTANTS:(k + 1) * INSTANTS]) for k in range(PHASES)]
         amp, depth_true = _demodulate(samples)
-        cov = np.mean([c for *_, c in samples], axis=0)
+        cov = np.mean([c for _, _, c, _ in samples], axis=0)
+        albedo = np.mean([al for *_, al in samples], axis=0)
         pose = between((rvec, tvec), moving_to, 0.5)
-    return _sense(camera, board, pose, conv, (amp, depth_true, cov), noise, gen, reflectivity[0], gain, dtype,
-                  invalid)
+    return _sense(camera, board, pose, conv, (amp, depth_true, cov, albedo), noise, gen, reflectivity[0], gain,
+                  dtype, invalid)
 
 
 def between(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray],
@@ -291,25 +295,25 @@ INSTANTS = 2
 UNAMBIGUOUS_RANGE_M = 5.0
 
 
-def _integrate(instants: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One correlation sample's amplitude, depth and coverage from the moments it integrates:
-    the depth is the amplitude-weighted phasor mean of what each moment saw."""
-    amps = np.stack([a for a, _, _ in instants])
-    depths = np.stack([d for _, d, _ in instants])
+def _integrate(instants: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+    """One correlation sample's amplitude, depth, coverage and albedo from the moments it
+    integrates: the depth is the amplitude-weighted phasor mean of what each moment saw."""
+    amps = np.stack([a for a, *_ in instants])
+    depths = np.stack([d for _, d, *_ in instants])
     seen = np.isfinite(depths)
     phasor = np.sum(np.where(seen, amps * np.exp(2j * np.pi * np.where(seen, depths, 0.0) / UNAMBIGUOUS_RANGE_M),
                              0.0), axis=0)
     depth = np.mod(np.angle(phasor), 2 * np.pi) * UNAMBIGUOUS_RANGE_M / (2 * np.pi)
     return (amps.mean(axis=0), np.where(seen.any(axis=0), depth, np.nan),
-            np.mean([c for *_, c in instants], axis=0))
+            np.mean([c for _, _, c, _ in instants], axis=0), np.mean([al for *_, al in instants], axis=0))
 
 
-def _demodulate(samples: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+def _demodulate(samples: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude and depth from ``PHASES`` samples (amplitude, depth) taken at different times:
     sample k correlates a * cos(phi + k 2 pi / PHASES), phi = 2 pi d / range; the camera reads
     phi back from all of them, so a pixel whose samples disagree gets a depth no surface has."""
-    amps = np.stack([a for a, _, _ in samples])
-    depths = np.stack([d for _, d, _ in samples])
+    amps = np.stack([a for a, *_ in samples])
+    depths = np.stack([d for _, d, *_ in samples])
     seen = np.isfinite(depths)
     a = np.where(seen, amps, 0.0)
     phi = 2 * np.pi * np.where(seen, depths, 0.0) / UNAMBIGUOUS_RANGE_M
@@ -323,9 +327,9 @@ def _demodulate(samples: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tup
 
 def _surfaces(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, conv: str, border: float,
               background: float | None, flying_pixels: bool, S: int,
-              reflectivity: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Noiseless amplitude (albedo * cos / r^2, anti-aliased), depth (NaN: no return) and board
-    coverage of each pixel at a pose."""
+              reflectivity: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Noiseless amplitude (albedo * cos / r^2, anti-aliased), depth (NaN: no return), board
+    coverage and albedo at the centre of each pixel at a pose."""
     refl_w, refl_b, refl_bg = (float(r) for r in reflectivity)
     R, t = _plane(rvec, tvec)
     W, H = camera.width, camera.height
@@ -392,21 +396,22 @@ def _surfaces(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarra
         if flying_pixels:
             mixed = (cov > 0) & (cov < 1) & np.isfinite(board_depth)
             depth_true = np.where(mixed, cov * board_depth + (1 - cov) * wall_depth, depth_true)
-    return amp, depth_true, cov
+    albedo = np.choose(cls_c, [refl_bg, refl_b, refl_w])
+    return amp, depth_true, cov, albedo
 
 
 def _sense(camera: SimCamera, board: Board, pose: tuple[np.ndarray, np.ndarray], conv: str,
-           surfaces: tuple[np.ndarray, np.ndarray, np.ndarray], noise: Noise, gen: np.random.Generator,
+           surfaces: tuple[np.ndarray, ...], noise: Noise, gen: np.random.Generator,
            a_ref: float, gain: float, dtype: type, invalid: float) -> Frame:
     """The sensor's errors on the noiseless images (``_surfaces``), and the frame's truth at ``pose``.
 
     ``a_ref``: the amplitude of a white square 1 m away, facing the camera."""
-    amp, depth_true, cov = surfaces
+    amp, depth_true, cov, albedo = surfaces
     H, W = amp.shape
     rvec, tvec = pose
     valid = np.isfinite(depth_true)
     # Draws happen in a fixed order so a seed always gives the same frame.
-    depth = depth_true + noise.offset
+    depth = depth_true + noise.offset + noise.dark_offset * (1 - albedo / a_ref)
     if noise.wiggle_amplitude > 0:
         depth = depth + noise.wiggle_amplitude * np.sin(
             2 * np.pi * depth_true / noise.wiggle_period + noise.wiggle_phase)
