@@ -27,9 +27,10 @@ from tof_calib_ros.core.detection import detect_corners
 
 BOARD = Board(5, 7, 0.03)
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_v2_tof"
+# ours on its defaults (the model chosen by the data), and the earlier fixed default beside it
 METHODS = {"traditional": dict(method="traditional"),
-           "ours": dict(method="depth"),
-           "ours+tilt": dict(method="depth", depth_bias="offset+tilt")}
+           "ours": {},
+           "ours offset-only": dict(depth_bias="offset", plane_squares="white")}
 VIEW_COUNTS = (3, 4, 5, 6, 7)
 
 _views: list[View] = []
@@ -109,9 +110,16 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
         refs[name] = res
         cells = [f"{res.K[i, j]:8.2f} ±{res.std[k]:5.2f}" for (i, j), k in
                  (((0, 0), "fx"), ((1, 1), "fy"), ((0, 2), "cx"), ((1, 2), "cy"))]
-        print(f"{name:18} {' '.join(f'{c:>16}' for c in cells)} {res.pixel_rms:7.3f} {dt:5.1f}")
+        print(f"{name:18} {' '.join(f'{c:>16}' for c in cells)} {res.pixel_rms:7.3f} {dt:5.1f}  "
+              f"(distortion {res.model.distortion}, depth {res.model.depth_bias}, planes {res.model.plane_squares})")
         report["reference"][name] = {"K": res.K.tolist(), "D": res.D.tolist(), "std": res.std,
-                                     "depth_bias": res.depth_bias.tolist(), "pixel_rms": res.pixel_rms}
+                                     "depth_bias": res.depth_bias.tolist(), "pixel_rms": res.pixel_rms,
+                                     "model": res.model.to_dict()}
+    trad = refs["traditional"].K
+    for name in METHODS:
+        d = refs[name].K[:2, 2] - trad[:2, 2]
+        print(f"  {name:18} principal point from OpenCV's all-view: dcx {d[0]:+6.2f}  dcy {d[1]:+6.2f} px")
+        report["reference"][name]["principal_point_from_opencv_px"] = d.tolist()
     if full_refs is not None:
         refs = {name: scaled_K(ref, scale) for name, ref in full_refs.items()}
         print("scored against the full-resolution references, scaled: "
@@ -124,8 +132,10 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
         even = calibrate(views[0::2], BOARD, **kwargs)
         diff = [odd.K[0, 0] - even.K[0, 0], odd.K[1, 1] - even.K[1, 1], odd.K[0, 2] - even.K[0, 2],
                 odd.K[1, 2] - even.K[1, 2]]
-        print(f"  {name:18} dfx {diff[0]:+7.2f}  dfy {diff[1]:+7.2f}  dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f}")
-        report["halves"][name] = diff
+        rel = [diff[0] / even.K[0, 0], diff[1] / even.K[1, 1]]
+        print(f"  {name:18} dfx {diff[0]:+7.2f} ({rel[0]:+.2%})  dfy {diff[1]:+7.2f} ({rel[1]:+.2%})  "
+              f"dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f}")
+        report["halves"][name] = diff + rel
     jobs_list = [(n, 1000 * n + k) for n in VIEW_COUNTS for k in range(draws)]
     with Pool(jobs, initializer=_init, initargs=(views,)) as pool:
         runs = pool.map(draw, jobs_list, chunksize=1)

@@ -153,7 +153,8 @@ def main() -> None:
         for r in regimes:
             sel = [x for x in rows if x["sensor"] == s and x["regime"] == r]
             ratios = np.array([x["ratio_traditional_over_ours"] for x in sel])
-            line = {"sensor": s, "regime": r, "ratio_min": float(ratios.min()), "ratio_median": float(np.median(ratios)),
+            line = {"sensor": s, "regime": r, "ratio_min": float(ratios.min()),
+                    "ratio_median": float(np.median(ratios)),
                     "ours_max_mm": max(x["ours"] for x in sel), "opencv_max_mm": max(x["traditional"] for x in sel),
                     "ours_worse_cells": int(np.sum(ratios < 1)), "ours_failures": sum(x["ours_failures"] for x in sel),
                     "sigma_ok": float(np.mean([x["ours_sigma_ok"] for x in sel])),

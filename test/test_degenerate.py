@@ -94,14 +94,24 @@ def _good(outcome) -> None:
 # ---------------------------------------------------------------------------------------------
 # view geometry
 
+def _refused_flagged_or_close(outcome, method: str) -> None:
+    """OpenCV must refuse or flag frontal views. The depth method may also calibrate them: each
+    plane's tilt holds the principal point, and with the distortion the data call for (not the
+    decentering terms that trade with it) it comes out within a fraction of a pixel; a trusted
+    result was checked close to the truth by _calibrate."""
+    if method == "depth" and isinstance(outcome, CalibrationResult) and outcome.ok:
+        return
+    _refused_or_flagged(outcome, "same orientation", "poorly constrained")
+
+
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("noise", [None, NOISE], ids=["exact", "noisy"])
 def test_fronto_parallel_views_at_several_distances(method, noise):
-    # The principal point trades against the boards' positions: no tilt, no principal point
-    # (OpenCV also loses the focal length: 4x the truth, which its verdict said was fine).
+    # Zhang: the principal point trades against the boards' positions: no tilt, no principal
+    # point (OpenCV also loses the focal length: 4x the truth, which its verdict said was fine).
     frames = _frames(FRONTAL, noise)
     outcome = _calibrate([View(f.depth, f.corners) for f in frames], method)
-    _refused_or_flagged(outcome, "same orientation", "poorly constrained")
+    _refused_flagged_or_close(outcome, method)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -109,7 +119,7 @@ def test_fronto_parallel_views_with_detected_corners(method):
     # Detected corners: the fit found cx 78 px off, and said std 0.07 px before the fix.
     frames = _frames(FRONTAL)
     outcome = _calibrate([View(f.depth, amplitude=f.amplitude) for f in frames], method)
-    _refused_or_flagged(outcome, "same orientation", "poorly constrained")
+    _refused_flagged_or_close(outcome, method)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -230,7 +240,7 @@ def _noisy(frames):
 @pytest.mark.parametrize("corrupt", [_shuffled, _swapped, _noisy], ids=["shuffled", "swapped", "noise-20px"])
 def test_corrupt_corners_fail_or_are_flagged(corrupt, tilted):
     outcome = _calibrate(corrupt(tilted), "depth")
-    _refused_or_flagged(outcome, "the corners and the depth disagree", "pixel RMS")
+    _refused_or_flagged(outcome, "the corners and the depth disagree", "RMS")   # pixel or depth residuals
 
 
 @pytest.mark.parametrize("corrupt", [_shuffled, _noisy], ids=["shuffled", "noise-20px"])

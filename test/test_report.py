@@ -200,7 +200,7 @@ def test_a_whole_board_calibration_is_recalibrated_on_the_whole_board(tmp_path):
     assert "planes on the all squares" in page.sections["summary"]
     assert "pixels of both colours" in page.sections["planarization"]
     even = calibrate(views[0::2], BOARD, distortion="plumb_bob", plane_squares="all")
-    white = calibrate(views[0::2], BOARD, distortion="plumb_bob")
+    white = calibrate(views[0::2], BOARD, distortion="plumb_bob", plane_squares="white")
     shown = page.rows("cross-validation")["fx"][0]
     assert _shows(shown, even.K[0, 0]) and not _shows(shown, white.K[0, 0])
 
@@ -210,10 +210,11 @@ def test_a_robust_fit_that_dropped_a_corner(tmp_path):
     views[2].corners[10] += (12.0, -9.0)   # misdetected
     result = calibrate(views, BOARD, distortion="plumb_bob", loss="cauchy")
     assert any("2: [10]" in n for n in result.notes)
-    page = _Page(write_report(tmp_path / "r.html", views, BOARD, result, loss="cauchy").read_text("utf-8"))
+    page = _Page(write_report(tmp_path / "r.html", views, BOARD, result).read_text("utf-8"))
     per_view = page.rows("views")
     assert per_view["2"][2] == str(BOARD.n_corners - 1) and per_view["0"][2] == str(BOARD.n_corners)
     assert "dropped outlier corners" in page.sections["summary"]
+    assert result.model.dropped_corners == {2: [10]}   # as data, for the report and the JSON
 
 
 def test_views_that_are_not_the_result_s_are_refused(report, tmp_path):
@@ -223,8 +224,6 @@ def test_views_that_are_not_the_result_s_are_refused(report, tmp_path):
     with pytest.raises(ReportError, match="does not match"):
         write_report(tmp_path / "r.html", [View(v.depth, None, None, None) for v in views[::-1]], Board(4, 3, 0.04),
                      result)
-    with pytest.raises(ReportError, match="convention"):
-        write_report(tmp_path / "r.html", views, BOARD, result, depth_convention="radial")
     assert not (tmp_path / "r.html").exists()
 
 

@@ -62,7 +62,7 @@ def test_one_refusal_in_the_same_words_for_node_and_cli(name, value, reason, on_
 def test_the_settings_reach_calibrate_and_the_collector():
     values = defaults() | {"calibration.loss": "huber", "depth.bias": "offset+tilt", "views.max": 30}
     assert calibration_options(values) == {"depth_convention": "z", "depth_bias": "offset+tilt", "distortion": "auto",
-                                           "loss": "huber", "plane_squares": "white"}
+                                           "loss": "huber", "plane_squares": "auto"}
     assert calibration_options(defaults())["loss"] is None
     config = collector_config(values, stills=True)
     assert (config.max_views, config.min_views, config.stills) == (30, 8, True)

@@ -237,12 +237,12 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
         # what went wrong, beside (never over) an earlier good calibration
         rejected.mkdir(exist_ok=True)
         written = [write_json(rejected / "calibration.json", result, extra),
-                   _write_report(rejected / "report.html", views, board, result, options, source["path"])]
+                   _write_report(rejected / "report.html", views, board, result, source["path"])]
         print("wrote " + ", ".join(str(p) for p in written))
         raise Failure(EXIT_QUALITY, f"calibration not trusted, nothing in {out} changed: " + "; ".join(result.verdict))
     try:
         yaml_path = write_calibration(out, result, views, args.camera_name, extra, report=lambda path: _write_report(
-            path, views, board, result, options, source["path"]))
+            path, views, board, result, source["path"]))
     except CalibrationFileError as exc:
         raise Failure(EXIT_ERROR, str(exc)) from None
     shutil.rmtree(rejected, ignore_errors=True)   # an earlier refusal's: this result replaces it
@@ -251,11 +251,10 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
     return EXIT_OK
 
 
-def _write_report(path: Path, views, board: Board, result, options: dict, title: str) -> Path:
-    """The report of ``result``, calibrating again with the ``options`` it was calibrated with."""
+def _write_report(path: Path, views, board: Board, result, title: str) -> Path:
+    """The report of ``result`` (which calibrates again with the options ``result`` records)."""
     from .report import write_report  # matplotlib is imported only when a report is written
-    return write_report(path, views, board, result, depth_convention=options["depth_convention"],
-                        loss=options["loss"], title=f"tof_calib: {title}")
+    return write_report(path, views, board, result, title=f"tof_calib: {title}")
 
 
 # -- commands ---------------------------------------------------------------------------------

@@ -17,7 +17,6 @@ import base64
 import datetime
 import html
 import io
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,9 +32,9 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from .calibration_file import atomic_write
 from .core import depth_bias as bias_model
 from .core.board import Board
-from .core.camera import check_convention, depth_of, pack_intrinsics, project, transform
+from .core.camera import depth_of, pack_intrinsics, project, transform
 from .core.errors import CalibrationError
-from .core.pipeline import DISTORTION_TERMS, View, calibrate, depth_in_metres
+from .core.pipeline import View, calibrate, depth_in_metres
 from .core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
 from .core.result import INTRINSIC_NAMES, CalibrationResult
 
@@ -48,9 +47,6 @@ DPI = 80
 PARAMS = INTRINSIC_NAMES + bias_model.NAMES
 UNITS = {"fx": "px", "fy": "px", "cx": "px", "cy": "px", "depth_offset": "mm"}
 SHOWN_SCALE = {"depth_offset": 1e3}   # the offset is shown in mm
-BIAS_TERMS = (("offset", ("depth_offset",)), ("scale", ("depth_scale",)),
-              ("tilt", ("depth_tilt_x", "depth_tilt_y")))
-OUTLIER_NOTE = re.compile(r"dropped outlier corners \(view: board indices\): (.*)")
 
 CSS = """
 body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
@@ -99,23 +95,19 @@ class _Comparison:
 
 
 def write_report(path, views: Sequence[View], board: Board, result: CalibrationResult, *,
-                 depth_convention: str = "z", title: str | None = None, depth_units: float | None = None,
-                 loss: str | None = None, progress: Callable[[str], None] | None = None) -> Path:
+                 title: str | None = None, progress: Callable[[str], None] | None = None) -> Path:
     """Write ``report.html`` for ``result``, the calibration of ``views`` (the very list given to
     ``calibrate``), atomically; returns the path.
 
     The report calibrates again (the other method on the same views; the even and odd views
-    separately) with the model the result shows: the depth bias terms and distortion terms
-    whose standard deviation is non-zero. ``depth_units`` and ``loss`` are the options given
-    to ``calibrate``, if any, which the result does not record. Raises ReportError when the
-    views do not match the result, and CalibrationFileError when the file cannot be written.
+    separately) with the options the result records and the model it chose. Raises ReportError
+    when the views do not match the result, and CalibrationFileError when the file cannot be
+    written.
     """
     say = progress or (lambda _msg: None)
-    if check_convention(depth_convention) != result.depth_convention:
-        raise ReportError(f"depth convention {depth_convention!r} differs from the result's "
-                          f"{result.depth_convention!r}")
-    data = _view_data(views, board, result, depth_units)
-    options = {**_model_options(result), "depth_units": depth_units, "loss": loss}
+    data = _view_data(views, board, result, result.options.depth_units)
+    fixed = result.options.fixed(result.model).to_dict()
+    options = {k: fixed[k] for k in ("depth_units", "depth_bias", "distortion", "loss", "plane_squares")}
     say("report: calibrating again with the other method and with the even and odd views")
     comparison = _compare(views, data, board, result, options)
     say("report: drawing the figures")
@@ -138,32 +130,12 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
 
 
 # -- what the report computes ------------------------------------------------------------------
-def _model_options(result: CalibrationResult) -> dict[str, str]:
-    """The depth bias and distortion model of the result (the terms it estimated: std > 0) and
-    the squares its planes were fitted to."""
-    free = {name for name, s in result.std.items() if s > 0}
-    terms = [4 + k for k, name in enumerate(INTRINSIC_NAMES[4:]) if name in free]
-    distortion = next((name for name, t in DISTORTION_TERMS.items() if t == terms), "auto")
-    bias = [term for term, names in BIAS_TERMS if free.intersection(names)]
-    return {"distortion": distortion, "depth_bias": "+".join(bias) or "none", "plane_squares": result.plane_squares}
-
-
-def _dropped_corners(notes: list[str]) -> dict[int, list[int]]:
-    """Board indices of the corners a robust fit dropped, per view, from the result's note."""
-    for note in notes:
-        m = OUTLIER_NOTE.search(note)
-        if m:
-            return {int(v): [int(i) for i in ids.split(",") if i.strip()]
-                    for v, ids in re.findall(r"(\d+): \[([\d, ]*)\]", m.group(1))}
-    return {}
-
-
 def _view_data(views: Sequence[View], board: Board, result: CalibrationResult,
                depth_units: float | None) -> list[_ViewData]:
     """Per-corner figures of the used views: the measured corners are the projection of the
     fitted pose less the residual, so no corner is detected again."""
     intr = pack_intrinsics(result.K, result.D)
-    dropped = _dropped_corners(result.notes)
+    dropped = result.model.dropped_corners
     w, h = result.image_size
     out = []
     for rep in result.views:
@@ -208,7 +180,7 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
         other = _calibrate([known[i] for i in used], board, result, "traditional", options)
     else:   # a traditional result says nothing of the depth model: the depth method's defaults
         other = _calibrate([known[i] for i in used], board, result, "depth",
-                           {k: options[k] for k in ("depth_units", "loss")})
+                           {k: result.options.to_dict()[k] for k in ("depth_units", "loss")})
     half_views = (used[0::2], used[1::2])
     if len(used) < MIN_CV_VIEWS:
         return _Comparison(other, None, half_views,
@@ -305,7 +277,8 @@ def _section_summary(result: CalibrationResult, views: Sequence[View], options: 
         ["image size", _e(f"{result.image_size[0]} x {result.image_size[1]} px")],
         ["depth convention", _e(result.depth_convention)],
         ["model", _e(f"distortion {options['distortion']}, depth bias {options['depth_bias']}"
-                     + (f", planes on the {options['plane_squares']} squares" if result.method == "depth" else ""))],
+                     + (f", planes on the {options['plane_squares']} squares" if result.method == "depth" else "")
+                     + "".join(f"; {r}" for r in result.model.reasons))],
         ["views used", _e(f"{len(result.views)} of {len(views)}")],
         ["pixel RMS", _e(f"{result.pixel_rms:.3f} px")],
         ["depth RMS", _e(f"{result.depth_rms * 1e3:.2f} mm" if np.isfinite(result.depth_rms) else "no depth")],
@@ -530,7 +503,8 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     intr = pack_intrinsics(result.K, result.D)
     conv, bias = result.depth_convention, result.depth_bias
     try:
-        samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude, squares=result.plane_squares)
+        samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude,
+                                squares=result.model.plane_squares)
     except CalibrationError as exc:
         return f'<p class="note">View {d.index} cannot be planarized again: {_e(exc)}</p>'
     # As the calibration does: RANSAC against outliers, then the plane in bias-corrected depth.
@@ -590,13 +564,13 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     ax.axhline(0, color="k", lw=0.5)
     rms = np.sqrt(np.nanmean(diff ** 2)) if np.isfinite(diff).any() else np.nan
     ax.set(xlabel="corner", ylabel="mm", title=f"raw − planarized at the corners, RMS {rms:.2f} mm")
-    fitted = "white-square pixels" if result.plane_squares == "white" else "pixels of both colours"
+    fitted = "white-square pixels" if result.model.plane_squares == "white" else "pixels of both colours"
     text = (f"View {d.index}, the one with the most plane pixels: {len(plane.pixels)} {fitted} fit the "
             f"plane with σ {plane.sigma * 1e3:.2f} mm on the white squares (bias-corrected depth); over the "
             f"whole board area (black squares and edges included) raw − plane has a robust σ of {sigma:.2f} mm; "
             f"at the {len(d.ids)} corners the raw depth differs from the planarized by {rms:.2f} mm RMS.")
     return (f"<p>{_e(text)}</p>" + _figure(fig, "planarization", "Top: the raw depth over the board, the plane "
-            f"fitted to its {result.plane_squares} squares (the depth the camera would report on it, bias "
+            f"fitted to its {result.model.plane_squares} squares (the depth the camera would report on it, bias "
             "included), and their difference, corners dotted. Bottom: the corner depths the calibration uses "
             "(planarized) against the raw depth there: the noise the planarization removes."))
 

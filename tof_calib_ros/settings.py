@@ -17,15 +17,15 @@ from .core import depth_bias
 from .core.board import MAX_CORNERS_PER_SIDE, MAX_SQUARE_M, MIN_CORNERS_PER_SIDE, MIN_SQUARE_M
 from .core.camera import DEPTH_CONVENTIONS
 from .core.errors import CalibrationError
-from .core.pipeline import DISTORTION_TERMS
-from .core.planarize import SQUARES
+from .core.options import DISTORTION_TERMS, PLANE_SQUARES
 
 LOSSES = ("none", "huber", "cauchy")
 
 
 def _depth_model(value: str) -> str | None:
     try:
-        depth_bias.parse(value)
+        if value != "auto":
+            depth_bias.parse(value)
     except CalibrationError as exc:
         return str(exc)
     return None
@@ -87,15 +87,15 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
             "centre ('radial', raw PMD)", flag="--depth-convention", choices=DEPTH_CONVENTIONS),
     Setting("depth.scale", 0.001, "metres per count of integer (16UC1) depth; 0.001: millimetres",
             flag="--depth-scale", low=1e-6, high=10.0),
-    Setting("depth.bias", "offset", "the depth's systematic error terms estimated alongside: none, or offset, "
-            "scale, tilt joined by + (offset+tilt for drivers that compute z-depth, e.g. Kinect v2)",
+    Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, and "
+            "scale and tilt where the data call for them), none, or offset, scale, tilt joined by +",
             flag="--depth-bias", check=_depth_model),
-    Setting("calibration.distortion", "auto", "distortion terms: auto (as many as the views support) or none, "
+    Setting("calibration.distortion", "auto", "distortion terms: auto (those the data call for) or none, "
             "k1, k1k2, plumb_bob, full", flag="--distortion", choices=("auto", *DISTORTION_TERMS)),
     Setting("calibration.loss", "none", "robust loss against misdetected corners: none, huber or cauchy",
             flag="--loss", choices=LOSSES),
-    Setting("calibration.plane_squares", "white", "the squares the depth planes are fitted to: white (the "
-            "paper's: ToF reads black ones farther) or all", flag="--plane-squares", choices=SQUARES),
+    Setting("calibration.plane_squares", "auto", "the squares the depth planes are fitted to: auto (all unless "
+            "the black ones read apart), white (the paper's) or all", flag="--plane-squares", choices=PLANE_SQUARES),
     Setting("calibration.timeout", 120.0, "seconds a calibration may take before its worker process is taken "
             "for stuck, killed and replaced", low=1.0, high=3600.0),
     Setting("sync.slop", 0.02, "largest stamp difference of a paired amplitude and depth frame, s", flag="--slop",

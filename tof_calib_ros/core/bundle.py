@@ -70,6 +70,9 @@ class Fit:
     free_global: np.ndarray             # indices into intrinsics + bias
     cost: float
     iterations: int
+    sigma_px: np.ndarray                # per view, the pixel and depth noise the fit assumed
+    sigma_depth: np.ndarray
+    weights: list[np.ndarray] | None    # per corner, the robust loss's weights
 
 
 @dataclass
@@ -94,7 +97,8 @@ class Problem:
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
                  sigma_depth: np.ndarray, free_global, free_poses: bool = True,
-                 weights: list[np.ndarray] | None = None):
+                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None,
+                 depth_excess: np.ndarray | None = None):
         self.n_views = len(views)
         self.convention = convention
         self.free_global = np.asarray(free_global, dtype=int)
@@ -107,7 +111,16 @@ class Problem:
         self.has_depth = np.isfinite(self.depth)
         self.pixel_scale = w / np.asarray(sigma_px)[self.view]
         self.depth_scale = (w / np.asarray(sigma_depth)[self.view])[self.has_depth]
+        # A view's depth error common to all its corners (``depth_excess``, m): the residuals'
+        # covariance is s^2 I + e^2 11^T, whitened by taking beta of the view's mean out.
+        self.depth_view = self.view[self.has_depth]
+        self.depth_count = np.maximum(np.bincount(self.depth_view, minlength=self.n_views), 1)
+        self.beta = None
+        if depth_excess is not None:
+            s_j, n_j = np.asarray(sigma_depth, dtype=float), self.depth_count
+            self.beta = (1 - s_j / np.sqrt(s_j ** 2 + n_j * np.asarray(depth_excess) ** 2))[self.depth_view]
         self.priors = [i for i in self.free_global.tolist() if i >= N_INTRINSICS]
+        self.prior_sigma = depth_bias.PRIOR_SIGMA if prior_sigma is None else prior_sigma
 
     @property
     def n_params(self) -> int:
@@ -151,24 +164,33 @@ class Problem:
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
 
+    def _decorrelate(self, rows: np.ndarray) -> np.ndarray:
+        """Depth residuals (or Jacobian rows) less beta of their view's mean."""
+        if self.beta is None:
+            return rows
+        flat = rows.reshape(len(rows), -1)
+        means = np.stack([np.bincount(self.depth_view, flat[:, k], self.n_views) for k in range(flat.shape[1])], 1)
+        out = flat - self.beta[:, None] * (means / self.depth_count[:, None])[self.depth_view]
+        return out.reshape(rows.shape)
+
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
         """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
         dpix, ddep, jp, jd = self.raw(state, jac)
-        prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+        prior = np.array([state.bias[i - N_INTRINSICS] / self.prior_sigma[i - N_INTRINSICS]
                           for i in self.priors])
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
-                            ddep[self.has_depth] * self.depth_scale, prior])
+                            self._decorrelate(ddep[self.has_depth]) * self.depth_scale, prior])
         if not jac:
             return r, None
         rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
-                               jd[self.has_depth] * self.depth_scale[:, None]])
+                               self._decorrelate(jd[self.has_depth]) * self.depth_scale[:, None]])
         view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth]])
         g = rows[:, self.free_global]
         pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
         if self.priors:
             gp = np.zeros((len(self.priors), len(self.free_global)))
             for k, i in enumerate(self.priors):
-                gp[k, list(self.free_global).index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+                gp[k, list(self.free_global).index(i)] = 1.0 / self.prior_sigma[i - N_INTRINSICS]
             g = np.vstack([g, gp])
             pose = np.vstack([pose, np.zeros((len(self.priors), 6))])
             view = np.concatenate([view, np.zeros(len(self.priors), dtype=int)])
@@ -282,16 +304,23 @@ def _robust_sigma(values: np.ndarray, floor: float) -> float:
 
 def solve(views: list[Observations], state: State, convention: str, free_global, free_poses: bool = True,
           rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
-          max_iter: int = 100) -> Fit:
+          max_iter: int = 100, depth_excess: np.ndarray | None = None,
+          prior_sigma: np.ndarray | None = None) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
-    normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners."""
+    normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners.
+    ``depth_excess`` (m, per view): an error of each view's depth as a whole, beyond its noise,
+    that the depth model does not explain; it lowers the weight of the view's depth level, which
+    is what holds the focal length, and so lets the corners take over, while the depth's shape
+    over the view (its tilt, which holds the principal point) keeps its weight. ``prior_sigma``: the
+    depth terms' priors, where not the defaults."""
     n = len(views)
     sigma_px = np.ones(n)
     sigma_d = np.full(n, 0.01)
     weights = None
     total_it = 0
     for _ in range(rounds):
-        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights)
+        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma,
+                          depth_excess)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
         dpix, ddep, _, _ = problem.raw(state)
@@ -311,12 +340,32 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         sigma_px, sigma_d = new_px, new_d
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
-    problem = Problem(views, convention, np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1]),
-                      free_global, free_poses, weights)
+    problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
+    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma,
+                      depth_excess)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.
     cov = global_covariance(_normal(J, r, n), free_poses) * max((r @ r) / dof, 1.0)
     dpix, ddep, _, _ = problem.raw(state)
     return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
-               problem.free_global, float(r @ r), total_it)
+               problem.free_global, float(r @ r), total_it, problem_sigmas[0], problem_sigmas[1], weights)
+
+
+def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
+    """How much freeing the ``extra`` global parameters would lower the fit's whitened cost, to
+    first order (the score test): the Gauss-Newton step's predicted gain, with the noise the fit
+    assumed. At the fit's optimum only the extra parameters contribute to it."""
+    free = np.r_[fit.free_global, np.asarray(extra, dtype=int)]
+    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, free, True, fit.weights)
+    r, J = problem.evaluate(fit.state, True)
+    N = _normal(J, r, len(views))
+    dg, dp = _solve_normal(N, 1e-9, True)
+    return float(-(N.g_glob @ dg + np.sum(N.g_pose * dp)))
+
+
+def n_observations(views: list[Observations]) -> float:
+    """Independent measurements the views hold: two per corner, and each view's depth as many
+    as it is worth (a plane's three), for an information criterion."""
+    return float(sum(2 * len(v.pixels) + (min(np.isfinite(v.depth).sum(), v.depth_dof or np.inf)
+                                          if np.isfinite(v.depth).any() else 0) for v in views))

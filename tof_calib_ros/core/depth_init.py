@@ -82,6 +82,30 @@ def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: l
     return out, offset, float(np.sqrt(np.mean(sol.fun ** 2)))
 
 
+def square_from_depth(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: list[np.ndarray],
+                      object_points: list[np.ndarray], convention: str) -> float:
+    """The square size the depth implies with the given intrinsics (the corners' alone, which do
+    not depend on it), as a multiple of the size given: the scale that, with a depth offset
+    fitted alongside, makes every square its size. What to tell a person whose square size or
+    depth unit is wrong."""
+    rows = [(p, d, o) for p, d, o in zip(pixels, depth, object_points) if np.isfinite(d).all()]
+    if not rows:
+        return float("nan")
+    r = [rays(p, intrinsics) for p, _, _ in rows]
+    pairs = [neighbour_pairs(o) for _, _, o in rows]
+
+    def residuals(k: np.ndarray) -> np.ndarray:
+        scale, offset = k
+        out = []
+        for rr, (_, d, _), (i, j, L) in zip(r, rows, pairs):
+            X = points_from_depth(rr, d - offset, convention)
+            out.append(np.linalg.norm(X[i] - X[j], axis=1) / L - scale)
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, np.array([1.0, 0.0]), method="lm", max_nfev=MAX_EVALUATIONS)
+    return float(sol.x[0])
+
+
 def pose_from_points(object_points: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Rigid board-to-camera pose (rvec, tvec) from corresponding 3D points (Kabsch)."""
     ok = np.all(np.isfinite(points), axis=1)

@@ -12,35 +12,34 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.stats import f as scipy_f
 from threadpoolctl import threadpool_limits
 
 from . import bundle
 from . import depth_bias as bias_model
 from .board import Board, whole_number
-from .camera import N_INTRINSICS, check_convention, split_intrinsics, transform_views
-from .depth_init import focal_guess, pose_from_pixels, pose_from_points, update_intrinsics
+from .camera import N_INTRINSICS, depth_of, split_intrinsics, transform_views
+from .depth_init import focal_guess, pose_from_pixels, pose_from_points, square_from_depth, update_intrinsics
 from .detection import Detection, detect
 from .errors import CalibrationError
+from .options import DISTORTION_TERMS, CalibrationOptions, Model
 from .planarize import (
     DepthSamples,
     Plane,
     board_samples,
-    check_squares,
     corner_depth_along,
     directions,
     fit_plane_to,
     fit_samples,
     sample_depth,
 )
-from .result import INTRINSIC_NAMES, CalibrationResult, ViewReport
+from .result import INTRINSIC_NAMES, MAX_CORNER_DEPTH_DISAGREEMENT, CalibrationResult, ViewReport
 from .traditional import Traditional, calibrate_opencv
 
-DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
-                    "full": [4, 5, 6, 7, 8]}
 MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
 CONTRADICTION_DEG = 5.0  # corners this far apart in tilt cannot be boards the depth shows parallel
 NO_BOARD = "no board found"
@@ -49,6 +48,10 @@ OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and
 PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independent numbers
 DEPTH_UNITS_RANGE = (1e-6, 1.0)  # metres per unit: micrometres to metres
 MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image say nothing across it
+BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
+MIN_BLACK_PIXELS = 30
+EXCESS_SIGMAS = 5.0  # a depth level this many standard errors from the corners' is a depth scale
+STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
 
 
 @dataclass
@@ -203,23 +206,6 @@ def _require(views: list[_Prepared], rejected: dict[int, str], min_views: int, n
                            + (f" ({why})" if why else ""))
 
 
-def _distortion_terms(distortion: str, views: list[_Prepared]) -> list[int]:
-    if distortion != "auto":
-        if not isinstance(distortion, str) or distortion not in DISTORTION_TERMS:
-            raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
-                                   f"got {distortion!r}")
-        return DISTORTION_TERMS[distortion]
-    per_view = np.median([len(v.corners) for v in views])
-    total = sum(len(v.corners) for v in views)
-    if per_view < 9:
-        return DISTORTION_TERMS["none"]
-    if total < 60:
-        return DISTORTION_TERMS["k1"]
-    if total < 150:
-        return DISTORTION_TERMS["k1k2"]
-    return DISTORTION_TERMS["plumb_bob"]
-
-
 class _PlaneSamples:
     """Every view's plane samples, with the distinct pixels among them: views share pixels,
     and undistorting each distinct pixel once is what keeps hundreds of views fast."""
@@ -332,8 +318,8 @@ def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional
     return bundle.solve(nodepth, state, convention, [0, 1, 2, 3, 4, 5, 6, 7], rounds=1, max_iter=0)
 
 
-def _result(method, image_size, convention, fit, views, planes, rejected, notes,
-            corner_fit: bundle.Fit | None = None, plane_squares: str = "white") -> CalibrationResult:
+def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
+            notes, corner_fit: bundle.Fit | None = None) -> CalibrationResult:
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
@@ -341,35 +327,34 @@ def _result(method, image_size, convention, fit, views, planes, rejected, notes,
     if corner_fit is not None:
         std = _std(corner_fit)
         corner_focal = (*map(float, corner_fit.state.intrinsics[:2]), std["fx"], std["fy"])
-    return CalibrationResult(method, image_size, convention, K, D, fit.state.bias.copy(), _std(fit),
-                             _report(views, fit, planes), rejected, notes, corner_focal, plane_squares)
+    return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
+                             _std(fit), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
+                             board.square)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
               depth_convention: str = "z", method: str = "depth", *, depth_units: float | None = None,
-              depth_bias: str = "offset", distortion: str = "auto", loss: str | None = None,
-              plane_squares: str = "white", min_views: int = 3,
+              depth_bias: str = "auto", distortion: str = "auto", loss: str | None = None,
+              plane_squares: str = "auto", min_views: int = 3,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
     """Calibrate a ToF camera from checkerboard views.
 
     ``image_size`` is (width, height), taken from the depth images when not given.
     ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline);
-    ``'depth'`` is the depth-aided method. ``depth_bias`` names the depth error terms estimated
-    alongside ('none', or 'offset', 'scale', 'tilt' joined by '+'). ``distortion`` is 'auto'
-    (as many plumb_bob terms as the corners support) or one of 'none', 'k1', 'k1k2',
-    'plumb_bob' (k1 k2 p1 p2), 'full' (with k3). ``loss`` 'huber' or 'cauchy' makes the fit
-    robust to misdetected corners. ``plane_squares`` is 'white' (the paper's: the depth plane is
-    fitted to the white squares, as real ToF cameras read black ones farther and noisier) or
-    'all' (the whole board, each colour with its own noise: a sensor that reads both colours
-    at the same range, such as the simulated one). Raises CalibrationError with the reason when
-    the views cannot be calibrated; check ``result.verdict`` before trusting a result.
+    ``'depth'`` is the depth-aided method. The model is chosen by the data where an option is
+    'auto' (the defaults): the distortion terms, the depth error terms and the squares the depth
+    planes use; see ``CalibrationOptions`` for the choices, and ``result.model`` for what was
+    chosen and why. ``loss`` 'huber' or 'cauchy' makes the fit robust to misdetected corners.
+    Raises CalibrationError with the reason when the options are wrong or the views cannot be
+    calibrated; check ``result.verdict`` before trusting a result.
     """
     # The linear algebra here is small: BLAS threads only contend (with each other and with
     # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
     _check_arguments(views, board, image_size, depth_units, min_views, progress)
+    options = CalibrationOptions(method, depth_convention, depth_units, depth_bias, distortion, loss, plane_squares,
+                                 min_views)
     try:
-        return _calibrate_with_loss(views, board, image_size, depth_convention, method, depth_units, depth_bias,
-                                   distortion, loss, plane_squares, min_views, progress)
+        return _calibrate_with_loss(views, board, image_size, options, progress)
     except CalibrationError:   # a ValueError too, and already the caller's
         raise
     except (cv2.error, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
@@ -379,12 +364,10 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
                                f"{' '.join(str(exc).split())[:200]}") from exc
 
 
-def _calibrate_with_loss(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion,
-                        loss, plane_squares, min_views, progress) -> CalibrationResult:
+def _calibrate_with_loss(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     with threadpool_limits(1):
-        result = _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias,
-                            distortion, loss, plane_squares, min_views, progress)
-        if loss is None:
+        result = _calibrate(views, board, image_size, options, progress)
+        if options.loss is None:
             return result
         # A robust loss bounds a misdetected corner's pull but still lets it shape the first
         # guesses and the planes: drop the corners it exposed and calibrate once more.
@@ -393,8 +376,8 @@ def _calibrate_with_loss(views, board, image_size, depth_convention, method, dep
             return result
         cleaned = [View(v.depth, *_without(v, board, dropped.get(i, [])), v.amplitude)
                    for i, v in enumerate(views)]
-        again = _calibrate(cleaned, board, image_size, depth_convention, method, depth_units, depth_bias,
-                           distortion, loss, plane_squares, min_views, progress)
+        again = _calibrate(cleaned, board, image_size, options, progress)
+        again.model.dropped_corners = dropped
         again.notes.append("dropped outlier corners (view: board indices): "
                            + "; ".join(f"{i}: {ids}" for i, ids in sorted(dropped.items())))
         return again
@@ -425,19 +408,227 @@ def _without(view: View, board: Board, drop: list[int]) -> tuple[np.ndarray | No
     return np.asarray(corners)[keep], ids[keep]
 
 
-def _calibrate(views, board, image_size, depth_convention, method, depth_units, depth_bias, distortion, loss,
-               plane_squares, min_views, progress) -> CalibrationResult:
+def _black_reads_apart(offsets: list[tuple[float, float]]) -> tuple[bool, str]:
+    """Whether the black squares read at another range than the white ones: each view's median
+    black-minus-white-plane depth and its standard error, pooled. Any difference the data can
+    see keeps the black squares out of the planes (a Kinect v2 reads them 4 mm farther)."""
+    if not offsets:
+        return True, "no black-square depth to compare: planes on the white squares"
+    d, se = np.array(offsets).T
+    w = 1 / np.maximum(se, 1e-6) ** 2
+    mean, err = float(np.sum(w * d) / np.sum(w)), float(1 / np.sqrt(np.sum(w)))
+    apart = abs(mean) > BLACK_APART_SIGMAS * err
+    return apart, (f"black squares read {mean * 1e3:+.2f} ± {err * 1e3:.2f} mm from the white squares' plane: "
+                   + ("planes on the white squares only" if apart else "planes on the whole board"))
+
+
+def _black_offset(smp: DepthSamples, plane: Plane, intr: np.ndarray, convention: str) -> tuple[float, float] | None:
+    """A view's median black-square depth off its white-square plane, with its standard error."""
+    black = smp.subset(smp.black)
+    if len(black.depth) < MIN_BLACK_PIXELS:
+        return None
+    r = black.depth - corner_depth_along(plane, directions(black.pixels, intr, convention))[0]
+    r = r[np.isfinite(r)]
+    if len(r) < MIN_BLACK_PIXELS:
+        return None
+    mad = 1.4826 * np.median(np.abs(r - np.median(r)))
+    return float(np.median(r)), float(1.2533 * mad / np.sqrt(len(r)))
+
+
+def _select_model(observations: list[bundle.Observations], state: bundle.State, convention: str,
+                  options: CalibrationOptions, say: Callable[[str], None]) -> tuple[bundle.State, list[int], Model]:
+    """The terms the data call for, by the score test against the Bayesian information
+    criterion: a term is taken when the drop in the whitened cost it brings exceeds ln(n) per
+    parameter, n being the independent measurements. Distortion grows along its presets
+    (k1, k2, then p1 p2, then k3); because the depth fixes each view's pose, it is observable
+    from 4 corners a view. The depth always has its offset; the tilt (a driver's z-depth
+    computed about another centre) is taken when it pays. A depth scale is never chosen
+    here: it would make the depth silent on the focal length (the two trade exactly), a ToF
+    camera's scale is set by its modulation frequency, and a scale the data seem to call for
+    is a wrong square size or depth unit, which the verdict reports."""
+    model = Model()
+    base = [0, 1, 2, 3]
+    if options.distortion != "auto":
+        base += DISTORTION_TERMS[options.distortion]
+        model.distortion = options.distortion
+    if options.depth_bias == "auto":
+        depth_terms, candidates = ["offset"], ["tilt"]
+    else:
+        depth_terms, candidates = ([] if options.depth_bias == "none" else options.depth_bias.split("+")), []
+    base += [N_INTRINSICS + k for k in bias_model.parse("+".join(depth_terms) or "none")]
+    fit = bundle.solve(observations, state, convention, base, loss=options.loss)
+    price = np.log(bundle.n_observations(observations))
+
+    def tested(name: str, terms: list[int]) -> float:
+        """The term's gain less its price, recorded as evidence."""
+        gain = bundle.score(observations, fit, convention, terms)
+        model.evidence[name] = {"gain": round(gain, 3), "price": round(len(terms) * price, 3)}
+        return gain - len(terms) * price
+
+    free = list(base)
+    if options.distortion == "auto":
+        while True:
+            # every larger preset, by the terms it adds: k1 alone may not pay where k1 and k2 do
+            larger = list(DISTORTION_TERMS)[list(DISTORTION_TERMS).index(model.distortion) + 1:]
+            extra = {name: [t for t in DISTORTION_TERMS[name] if t not in free] for name in larger}
+            net = {name: tested(name, terms) for name, terms in extra.items()}
+            best = max(net, key=net.get, default=None)
+            if best is None or net[best] <= 0:
+                break
+            free += extra[best]
+            model.distortion = best
+            fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss)
+    while candidates:
+        net = {c: tested(c, [N_INTRINSICS + k for k in bias_model.TERMS[c]]) for c in candidates}
+        best = max(net, key=net.get)
+        if net[best] <= 0:
+            break
+        candidates.remove(best)
+        depth_terms.append(best)
+        free += [N_INTRINSICS + k for k in bias_model.TERMS[best]]
+        fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss)
+    model.depth_bias = "+".join(depth_terms) or "none"
+    if options.distortion == "auto" or options.depth_bias == "auto":
+        model.reasons.append(f"chosen by the data: distortion {model.distortion}, depth terms {model.depth_bias} ("
+                             + ", ".join(f"{k} {v['gain']:.1f} vs {v['price']:.1f}" for k, v in model.evidence.items())
+                             + ": the cost each term would remove against its price)")
+        say(model.reasons[-1])
+    return fit.state, sorted(free), model
+
+
+def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say,
+           excess: np.ndarray | None = None, prior: np.ndarray | None = None):
+    """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
+    hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
+    noiseless data exact). Returns the fit, the corner depths and the planes."""
+    convention = options.depth_convention
+    for _ in range(MAX_OUTER_ROUNDS):
+        before = np.r_[state.intrinsics, state.bias]
+        fit = bundle.solve(observations, state, convention, free, loss=options.loss, depth_excess=excess,
+                           prior_sigma=prior)
+        state = fit.state
+        say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
+            f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
+        depths, floors, planes = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias, convention)
+        observations = _observations(obj, prepared, depths, floors)
+        change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
+        std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
+        if np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
+            break
+    return fit, depths, planes
+
+
+def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[float, float] | None:
+    """How much of the views' depth-to-corner distance ratios ``r`` (standard errors ``s``) is a
+    smooth function of the distance ``z`` beyond the offset's a + b / z: a quadratic over the
+    range, kept when an F-test finds it (so views that merely scatter, from causes that do not
+    follow the distance, do not count). Returns its RMS (relative) and the F statistic."""
+    n = len(r)
+    if n < 5:
+        return None
+    t = (z - z.mean()) / max(np.ptp(z), 1e-9)
+    base = np.column_stack([np.ones(n), 1 / z])
+    full = np.column_stack([base, t, t ** 2])
+    fits = [np.linalg.lstsq(A / s[:, None], r / s, rcond=None)[0] for A in (base, full)]
+    chi2 = [float(np.sum(((r - A @ c) / s) ** 2)) for A, c in zip((base, full), fits)]
+    dof = n - full.shape[1]
+    if dof < 1:
+        return None
+    f_stat = (chi2[0] - chi2[1]) / 2 / max(chi2[1] / dof, 1.0)
+    if f_stat <= scipy_f.ppf(1 - STRUCTURE_P, 2, dof):
+        return None
+    shape = full[:, 2:] @ fits[1][2:]
+    return float(np.sqrt(np.mean((shape - shape.mean()) ** 2))), float(f_stat)
+
+
+@dataclass
+class _DepthCheck:
+    excess: np.ndarray | None = None      # m, per view: depth error beyond the noise
+    scale_prior: float | None = None      # the depth scale's prior sigma, when the corners call for one
+    reasons: list[str] = field(default_factory=list)
+
+
+def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
+                 obj: list[np.ndarray], corner_fit: bundle.Fit | None, convention: str) -> _DepthCheck:
+    """Each view's depth error beyond its noise that the depth model does not explain, and the
+    depth's scale as far as the corners can tell it.
+
+    The depth holds the focal length through each view's distance: the corners alone give
+    that distance up to the focal length (the board's size in the image; with the corners' own
+    calibration ``corner_intr``, which the depth did not shape), the depth gives it in metres.
+    Their ratio must be the same for every view, up to the offset the model removes; a ToF
+    wiggling error (or any error that varies with distance) makes it vary beyond what the
+    corner and plane noise allow. That spread, estimated from the views, is each view's excess
+    depth error: with it the depth weighs as much as it deserves, and the corners take over
+    where it deserves little. A level common to every ratio is a depth scale (the slope of a
+    wiggling error over the distances seen, a square size or depth unit a little off) or a
+    bias of the corners: within MAX_CORNER_DEPTH_DISAGREEMENT, and when the corners fix it
+    better than the level itself, the depth gets a scale term whose prior is that level, so
+    the focal length rests on both by their merits; beyond it the verdict refuses."""
+    check = _DepthCheck()
+    if corner_fit is None:
+        return check
+    K, D = split_intrinsics(corner_fit.state.intrinsics)
+    bias = fit.state.bias
+    ratio, sigma, dist = [], [], []
+    distance = np.zeros(len(prepared))
+    for j, (v, d, o, plane) in enumerate(zip(prepared, depths, obj, planes)):
+        if plane is None or not np.isfinite(d).all():
+            continue
+        ok, rvec, tvec = cv2.solvePnP(o, v.corners, K, D, fit.state.poses[j, :3].copy(), fit.state.poses[j, 3:].copy(),
+                                      useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        if not ok:
+            continue
+        X = transform_views(np.r_[rvec.ravel(), tvec.ravel()][None], o, np.zeros(len(o), dtype=int))[0]
+        from_pixels = float(np.mean(depth_of(X, convention)[0]))
+        u = directions(v.corners, fit.state.intrinsics, convention)
+        from_depth = float(np.mean(bias_model.true_depth(bias, d, u)))
+        spread_px = np.sqrt(np.mean(np.sum((v.corners - v.corners.mean(0)) ** 2, axis=1)))
+        px = max(float(np.sqrt(np.mean(fit.pixel_residuals[j] ** 2))), bundle.MIN_NOISE[0])
+        plane_se = max(float(np.median(corner_depth_along(plane, u)[1])), bundle.MIN_NOISE[1])
+        distance[j] = from_pixels
+        ratio.append(from_depth / from_pixels - 1)
+        sigma.append(np.hypot(px / (spread_px * np.sqrt(len(o) / 2)), plane_se / from_depth))
+        dist.append(from_pixels)
+    n = len(ratio)
+    if n < 3:
+        return check
+    r, s, z = np.array(ratio), np.array(sigma), np.array(dist)
+    A = np.column_stack([np.ones(n), 1 / z])
+    coef, *_ = np.linalg.lstsq(A / s[:, None], r / s, rcond=None)
+    res = r - A @ coef
+    dof = n - 2
+    structure = _distance_structure(r, s, z)
+    if structure is not None:
+        tau, f_stat = structure
+        s = np.hypot(s, tau)
+        check.excess = tau * distance
+        check.reasons.append(
+            f"the ratio of the views' distances from the depth and from the corners varies with the distance "
+            f"({tau:.2%} RMS, F = {f_stat:.0f}): a depth error over distance the model does not explain (ToF "
+            "wiggling?); each view's depth level weighs that much less")
+    # the level at the views' mean distance, with the corners' own focal-length uncertainty
+    Aw = A / s[:, None]
+    cov = np.linalg.inv(Aw.T @ Aw) * max(float(np.sum((res / s) ** 2)) / max(dof, 1), 1.0)
+    at = np.array([1.0, np.mean(1 / z)])
+    level = float(at @ coef)
+    corner_rel = corner_fit.covariance[0, 0] ** 0.5 / corner_fit.state.intrinsics[0]
+    level_sigma = float(np.hypot(np.sqrt(at @ cov @ at), corner_rel))
+    if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
+        check.scale_prior = abs(level)
+        check.reasons.append(
+            f"the depth reads {level:+.2%} (±{level_sigma:.2%}) off the distances the corners give: a depth scale "
+            "(the slope of a wiggling error, a square a little off) or a bias of the corners; a depth scale term "
+            f"with a prior of {abs(level):.2%} lets both weigh by their merits")
+    return check
+
+
+def _calibrate(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
-    convention = check_convention(depth_convention)
-    if method not in ("depth", "traditional"):
-        raise CalibrationError(f"method must be 'depth' or 'traditional', got {method!r}")
-    bias_terms = [N_INTRINSICS + k for k in bias_model.parse(depth_bias)]
-    if loss not in (None, "huber", "cauchy"):
-        raise CalibrationError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
-    check_squares(plane_squares)
-    prepared, rejected, image_size = _prepare(views, board, image_size, depth_units)
+    convention = options.depth_convention
+    prepared, rejected, image_size = _prepare(views, board, image_size, options.depth_units)
     say(f"{len(prepared)} of {len(views)} views have a board")
-    _require(prepared, rejected, min_views, len(views))
+    _require(prepared, rejected, options.min_views, len(views))
     obj = [board.object_points(v.ids) for v in prepared]
     notes: list[str] = []
     trad: Traditional | None = None
@@ -446,27 +637,32 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
         say(f"traditional calibration: fx={trad.intrinsics[0]:.2f} fy={trad.intrinsics[1]:.2f}, "
             f"RMS {trad.rms:.3f} px")
     except CalibrationError as exc:
-        if method == "traditional":
+        if options.method == "traditional":
             raise
         notes.append(f"{exc}; initialised from the depth data instead")
         say(notes[-1])
 
     corner_fit = None if trad is None else _corner_fit(obj, prepared, trad, convention)
-    if method == "traditional":
-        return _result(method, image_size, convention, corner_fit, prepared, None, rejected, notes)
+    if options.method == "traditional":
+        model = Model(distortion="plumb_bob", depth_bias="none", plane_squares="white")
+        return _result(options, model, board, image_size, corner_fit, prepared, None, rejected, notes)
 
-    # Choose each view's plane samples once (white squares, valid depth, RANSAC inliers); a view
-    # whose depth is unusable still counts with its corners, and the notes say so.
+    # Choose each view's plane samples once (valid depth, RANSAC inliers); a view whose depth is
+    # unusable still counts with its corners, and the notes say so.
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
     first = trad.intrinsics if trad is not None else guess
+    sampled = "all" if options.plane_squares == "auto" else options.plane_squares
     samples: list[DepthSamples | None] = []
-    first_planes = []
+    first_planes, black_offsets = [], []
     for v in prepared:
         try:
-            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude, squares=plane_squares)
-            plane = fit_samples(smp, first, convention, ransac=True)
-            samples.append(smp.subset(plane.inliers))
+            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude, squares=sampled)
+            plane = fit_samples(smp.subset(~smp.black), first, convention, ransac=True)
+            offset = _black_offset(smp, plane, first, convention)
+            if offset is not None:
+                black_offsets.append(offset)
+            samples.append(smp)
             first_planes.append(plane)
         except CalibrationError as exc:
             samples.append(None)
@@ -476,11 +672,25 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
         raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
                                "method='traditional' calibrates from the corners alone")
     _check_not_parallel(first_planes, None if trad is None else trad.poses)
+    squares = options.plane_squares
+    squares_reason = ""
+    if squares == "auto":
+        apart, squares_reason = _black_reads_apart(black_offsets)
+        squares = "white" if apart else "all"
+        say(squares_reason)
+    # RANSAC once on the chosen squares; its inliers are the view's samples from here on.
+    for k, smp in enumerate(samples):
+        if smp is not None:
+            chosen = smp if squares == "all" else smp.subset(~smp.black)
+            samples[k] = chosen.subset(fit_samples(chosen, first, convention, ransac=True).inliers)
     plane_samples = _PlaneSamples(samples, image_size[0])
-    # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better.
-    estimate_offset = N_INTRINSICS in bias_terms
+    # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better;
+    # distortion starts at none (OpenCV's, from few corners, can be wild) unless it was asked for.
+    estimate_offset = options.depth_bias == "auto" or 0 in bias_model.parse(options.depth_bias)
     obj_pts = [board.object_points(v.ids) for v in prepared]
     guesses = [guess] if trad is None else [trad.intrinsics, guess]
+    kept = [0, 1, 2, 3] + DISTORTION_TERMS.get(options.distortion, [])
+    guesses = [np.where(np.isin(np.arange(N_INTRINSICS), kept), g, 0.0) for g in guesses]
     try:
         start = min(guesses, key=lambda g: update_intrinsics(
             g, [v.corners for v in prepared], _planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS),
@@ -500,27 +710,32 @@ def _calibrate(views, board, image_size, depth_convention, method, depth_units, 
             poses.append(pose_from_points(o, u * bias_model.true_depth(bias, d, u)[:, None]))
         else:
             poses.append(pose_from_pixels(o, v.corners, intr))
-    poses = np.array(poses)
-    state = bundle.State(intr, bias, poses)
-    dist = _distortion_terms(distortion, prepared)
+    state = bundle.State(intr, bias, np.array(poses))
     # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
     observations = _observations(obj, prepared, depths, floors)
     state = bundle.solve(observations, state, convention, [], rounds=1).state
-    if dist:
-        state = bundle.solve(observations, state, convention, dist, rounds=1).state
-    for _ in range(MAX_OUTER_ROUNDS):
-        before = np.r_[state.intrinsics, state.bias]
-        fit = bundle.solve(observations, state, convention, [0, 1, 2, 3] + dist + bias_terms, loss=loss)
-        state = fit.state
-        say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
-            f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias, convention)
-        observations = _observations(obj, prepared, depths, floors)
-        # Settled once no estimated parameter moves by a hundredth of its own uncertainty.
-        change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
-        std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
-        if np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
-            break
-    return _result("depth", image_size, convention, fit, prepared, planes, rejected, notes, corner_fit,
-                   plane_squares)
+    state, free, model = _select_model(observations, state, convention, options, say)
+    model.plane_squares = squares
+    if squares_reason:
+        model.reasons.append(squares_reason)
+    fit, depths, planes = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
+    check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention) \
+        if options.depth_bias == "auto" else _DepthCheck()
+    for why in check.reasons:
+        model.reasons.append(why)
+        say(why)
+    if check.reasons:
+        prior = None
+        if check.scale_prior is not None:
+            free = sorted(free + [N_INTRINSICS + 1])
+            prior = bias_model.PRIOR_SIGMA.copy()
+            prior[1] = check.scale_prior
+            model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
+        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say,
+                                     check.excess, prior)
+    result = _result(options, model, board, image_size, fit, prepared, planes, rejected, notes, corner_fit)
+    if corner_fit is not None:
+        result.depth_square = board.square * square_from_depth(
+            corner_fit.state.intrinsics, [v.corners for v in prepared], depths, obj, convention)
+    return result

@@ -8,8 +8,8 @@ RANSAC + SVD, and read each corner's depth where its viewing ray meets that plan
 
 Beyond the paper, ``squares="all"`` fits the plane to the whole board, each colour weighted
 by its own noise: for sensors that read both colours at the same range. Real ToF cameras
-do not (a Kinect v2 reads its black squares 4 mm farther), hence the paper's white squares
-by default.
+often do not (a Kinect v2 reads its black squares 4 mm farther): the calibration chooses
+(see pipeline).
 """
 from __future__ import annotations
 
@@ -24,7 +24,6 @@ from .camera import rays, undistort_normalized
 from .errors import CalibrationError
 
 MIN_PLANE_PIXELS = 30
-SQUARES = ("white", "all")
 
 
 @dataclass
@@ -46,12 +45,6 @@ class Plane:
     def normal(self) -> np.ndarray:
         """Unit normal, facing the camera."""
         return -self.coef / np.linalg.norm(self.coef)
-
-
-def check_squares(squares: str) -> str:
-    if squares not in SQUARES:
-        raise CalibrationError(f"plane_squares must be one of {', '.join(map(repr, SQUARES))}, got {squares!r}")
-    return squares
 
 
 def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, board: Board,

@@ -6,10 +6,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .depth_bias import NAMES
+from .options import CalibrationOptions, Model
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 # Thresholds of the quality verdict; each failed one is given as a reason.
+# (A depth scale this far from 1 is a wrong square size or depth unit as well, see below.)
 MAX_PIXEL_RMS = 1.0          # px
 MAX_DEPTH_RMS = 0.02         # m, after the bias correction
 MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
@@ -51,7 +53,10 @@ class CalibrationResult:
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     corner_focal: tuple[float, float, float, float] | None = None   # fx, fy, std fx, std fy from the corners alone
-    plane_squares: str = "white"  # the squares the depth planes were fitted to, see calibrate()
+    options: CalibrationOptions = field(default_factory=CalibrationOptions)   # as asked
+    model: Model = field(default_factory=Model)   # as chosen: distortion, depth terms, plane squares, and why
+    square: float = float("nan")   # m, the board's square size as given
+    depth_square: float = float("nan")   # m, the square size the depth implies with the corners' focal length
 
     @property
     def depth_offset(self) -> float:
@@ -92,10 +97,21 @@ class CalibrationResult:
                 apart = np.hypot(s, self.std.get(name, 0.0))
                 if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
                     reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
-                                   f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): the squares "
-                                   f"look {'larger' if f > c else 'smaller'} than the size given (or the depth's "
-                                   "units are off): is the square size right, and the depth's units?")
+                                   f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
+                                   + self._squares_look(f / c))
+        scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
+        if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
+            reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
+                           "give: " + self._squares_look(1 + scale))
         return reasons
+
+    def _squares_look(self, ratio: float) -> str:
+        """What a square size ``ratio`` times the given one would mean, for a person to check."""
+        size = self.depth_square if np.isfinite(self.depth_square) else self.square * ratio
+        implied = f" (the depth says {size * 1e3:.1f} mm, not the {self.square * 1e3:.1f} mm given)" \
+            if np.isfinite(size) else ""
+        return (f"the squares look {'larger' if ratio > 1 else 'smaller'} than the size given{implied}, or the "
+                "depth's units are off: is the square size right, and the depth's units?")
 
     @property
     def ok(self) -> bool:
@@ -119,7 +135,8 @@ class CalibrationResult:
             "image_width": int(self.image_size[0]),
             "image_height": int(self.image_size[1]),
             "depth_convention": self.depth_convention,
-            "plane_squares": self.plane_squares,
+            "options": self.options.to_dict(),
+            "model": self.model.to_dict(),
             "camera_matrix": self.K.tolist(),
             "distortion_model": "plumb_bob",
             "distortion_coefficients": self.D.tolist(),
@@ -131,6 +148,8 @@ class CalibrationResult:
             "notes": list(self.notes),
             "corner_only_focal": None if self.corner_focal is None else dict(zip(
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.corner_focal))),
+            "square_m": self.square,
+            "square_from_depth_m": self.depth_square,
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
             "views": [{
                 "index": v.index, "rvec": v.rvec.tolist(), "tvec": v.tvec.tolist(),

@@ -1,0 +1,82 @@
+"""The model chosen by the data: each rule recovers the true model of a sensor made to have it."""
+import numpy as np
+import pytest
+
+from tof_calib_ros import Board, View, calibrate, sim
+from tof_calib_ros.core import camera as cam
+
+BOARD = Board(11, 11, 0.05)
+F = 284.4
+
+
+def _views(params, n_img, n_corn, seed, tilt=40.0, noise=None, depth_tilt=(0.0, 0.0)):
+    """The paper's protocol: ``n_corn`` corners spread over the board, 0.01 px corner noise."""
+    camera = sim.SimCamera(np.asarray(params, dtype=float), 200, 200)
+    rng = np.random.default_rng(seed)
+    poses = sim.random_poses(camera, BOARD, n_img, rng, distance=(0.9, 1.4), max_tilt_deg=tilt)
+    k = int(round(np.sqrt(n_corn)))
+    sel = np.round(np.linspace(0, BOARD.cols - 1, k)).astype(int)
+    ids = np.array([r * BOARD.cols + c for r in sel for c in sel])
+    xs, ys = np.meshgrid(np.arange(200.0), np.arange(200.0))
+    ray = cam.rays(np.column_stack([xs.ravel(), ys.ravel()]), camera.params).reshape(200, 200, 3)
+    views = []
+    for rvec, tvec in poses:
+        f = sim.render(camera, BOARD, rvec, tvec, noise=noise or sim.Noise(depth=0.005), rng=rng)
+        # a depth axis off the optical axis: the depth reads tilt_x * X + tilt_y * Y more
+        depth = f.depth + depth_tilt[0] * ray[..., 0] * f.depth_true + depth_tilt[1] * ray[..., 1] * f.depth_true
+        views.append(View(depth, f.corners[ids] + rng.normal(0, 0.01, (len(ids), 2)), ids))
+    return views
+
+
+@pytest.mark.parametrize("lens, expected", [
+    ((0, 0, 0, 0, 0), {"none"}),
+    ((-0.3, 0, 0, 0, 0), {"k1"}),
+    ((-0.3, 0.1, 0, 0, 0), {"k1k2", "plumb_bob"}),
+])
+def test_the_distortion_terms_the_lens_has(lens, expected):
+    views = _views([F, F, 99.5, 99.5, *lens], 6, 25, seed=3)
+    res = calibrate(views, BOARD)
+    assert res.model.distortion in expected, res.model.reasons
+    assert res.K[0, 0] == pytest.approx(F, abs=3 * res.std["fx"] + 0.05)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 6, pytest.param(5, marks=pytest.mark.xfail(
+    strict=True, reason="known: the score test at the distortion-free fit misses k1 here and the "
+    "result is trusted 2.8 % off (11 sigma); see the closing note of issue 12"))])
+def test_four_corners_three_images_with_a_real_lens(seed):
+    """Where OpenCV refuses (4 corners x 3 images) and a strong lens: the depth fixes the poses,
+    so distortion is observable; a trusted focal length is within 1 % (how often within its
+    stated sigmas is the benchmark's to count)."""
+    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 3, 4, seed)
+    res = calibrate(views, BOARD)
+    if res.ok:
+        assert abs(res.K[0, 0] / F - 1) < 0.01, (res.K[0, 0], res.std["fx"], res.model.reasons)
+    else:
+        assert any("poorly constrained" in r for r in res.verdict), res.verdict
+
+
+@pytest.mark.parametrize("depth_tilt, chosen", [((0.0, 0.0), False), ((0.02, -0.015), True)])
+def test_the_depth_tilt_is_taken_when_the_sensor_has_it(depth_tilt, chosen):
+    views = _views([F, F, 99.5, 99.5, 0, 0, 0, 0, 0], 6, 25, seed=4, depth_tilt=depth_tilt)
+    res = calibrate(views, BOARD)
+    assert ("tilt" in res.model.depth_bias.split("+")) == chosen, res.model.reasons
+    if chosen:
+        assert res.depth_bias[2:4] == pytest.approx(depth_tilt, abs=0.003)
+    assert res.K[0, 2] == pytest.approx(99.5, abs=1.0) and res.K[1, 2] == pytest.approx(99.5, abs=1.0)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_wiggling_depth_yields_to_the_corners(seed):
+    """15 mm of wiggling (a sinusoid of the distance, 1.87 m period): over the distances seen its
+    slope reads as a depth scale of a few percent, which the depth alone would put in the focal
+    length. The corners see the level: a scale term with that prior takes it, and the focal
+    length comes out within its stated uncertainty of the truth."""
+    rng = np.random.default_rng(seed)
+    noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
+    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=100 * seed + 5, noise=noise)
+    res = calibrate(views, BOARD)
+    assert any("off the distances the corners give" in r for r in res.model.reasons), res.model.reasons
+    assert "scale" in res.model.depth_bias
+    assert abs(res.K[0, 0] - F) < 3 * res.std["fx"], (res.K[0, 0], res.std["fx"])
+    assert abs(res.K[0, 0] / F - 1) < 0.005
+    assert res.to_dict()["model"]["depth_bias"] == res.model.depth_bias   # the result carries its model

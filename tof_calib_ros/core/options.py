@@ -1,0 +1,84 @@
+"""How a calibration is to be done, checked once before any work, and what the data chose.
+
+``CalibrationOptions`` holds what the caller asked for; a bad option fails here, before a view
+is read. ``Model`` is what a depth-aided calibration settled on where the options left the
+choice to the data ('auto'): the distortion terms, the depth error terms, the squares the depth
+planes use, and the evidence for each choice. Both travel with the result, so that a report or
+a cross-validation repeats the calibration exactly, as mrcal's ``optimization_inputs`` do.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from . import depth_bias as bias_model
+from .camera import check_convention
+from .errors import CalibrationError
+
+# The distortion presets, each the one before plus terms (indices into the intrinsics).
+DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
+                    "full": [4, 5, 6, 7, 8]}
+PLANE_SQUARES = ("auto", "white", "all")
+METHODS = ("depth", "traditional")
+LOSSES = (None, "huber", "cauchy")
+
+
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """``depth_bias``: 'auto' (the offset, and scale and tilt where the data call for them),
+    'none', or terms from 'offset', 'scale', 'tilt' joined by '+'. ``distortion``: 'auto' (the
+    plumb_bob terms the data call for) or a preset of ``DISTORTION_TERMS``. ``plane_squares``:
+    'auto' (the whole board unless the black squares read apart from the white), 'white' (the
+    paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'."""
+
+    method: str = "depth"
+    depth_convention: str = "z"
+    depth_units: float | None = None
+    depth_bias: str = "auto"
+    distortion: str = "auto"
+    loss: str | None = None
+    plane_squares: str = "auto"
+    min_views: int = 3
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise CalibrationError(f"method must be 'depth' or 'traditional', got {self.method!r}")
+        check_convention(self.depth_convention)
+        if self.depth_bias != "auto":
+            bias_model.parse(self.depth_bias)
+        if not isinstance(self.distortion, str) or self.distortion not in ("auto", *DISTORTION_TERMS):
+            raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
+                                   f"got {self.distortion!r}")
+        if self.loss not in LOSSES:
+            raise CalibrationError(f"loss must be None, 'huber' or 'cauchy', got {self.loss!r}")
+        if self.plane_squares not in PLANE_SQUARES:
+            raise CalibrationError(f"plane_squares must be one of {', '.join(map(repr, PLANE_SQUARES))}, "
+                                   f"got {self.plane_squares!r}")
+
+    def fixed(self, model: Model) -> CalibrationOptions:
+        """These options with every 'auto' replaced by what ``model`` chose: the same
+        calibration on other views (halves, held-out views) without choosing again."""
+        return CalibrationOptions(self.method, self.depth_convention, self.depth_units, model.depth_bias,
+                                  model.distortion, self.loss, model.plane_squares, self.min_views)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class Model:
+    """What the calibration settled on, and why. ``evidence``: for each term tested, the drop in
+    the whitened cost it would bring (the score test) against the information criterion's
+    price for its parameters; a term is taken when the drop exceeds the price.
+    ``dropped_corners``: board indices, per view, of corners a robust loss removed."""
+
+    distortion: str = "none"
+    depth_bias: str = "none"
+    plane_squares: str = "white"
+    evidence: dict[str, dict[str, float]] = field(default_factory=dict)
+    reasons: list[str] = field(default_factory=list)
+    dropped_corners: dict[int, list[int]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["dropped_corners"] = {str(k): v for k, v in self.dropped_corners.items()}
+        return out
