@@ -65,18 +65,18 @@ def test_the_depth_tilt_is_taken_when_the_sensor_has_it(depth_tilt, chosen):
     assert res.K[0, 2] == pytest.approx(99.5, abs=1.0) and res.K[1, 2] == pytest.approx(99.5, abs=1.0)
 
 
-@pytest.mark.parametrize("seed", [0, 2])
-def test_a_wiggling_depth_yields_to_the_corners(seed):
-    """15 mm of wiggling (a sinusoid of the distance, 1.87 m period): over the distances seen its
-    slope reads as a depth scale of a few percent, which the depth alone would put in the focal
-    length. The corners see the level: a scale term with that prior takes it, and the focal
-    length comes out within its stated uncertainty of the truth."""
-    rng = np.random.default_rng(seed)
-    noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
-    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=100 * seed + 5, noise=noise)
-    res = calibrate(views, BOARD)
-    assert any("off the distances the corners give" in r for r in res.model.reasons), res.model.reasons
-    assert "scale" in res.model.depth_bias
-    assert abs(res.K[0, 0] - F) < 3 * res.std["fx"], (res.K[0, 0], res.std["fx"])
-    assert abs(res.K[0, 0] / F - 1) < 0.005
-    assert res.to_dict()["model"]["depth_bias"] == res.model.depth_bias   # the result carries its model
+def test_a_wiggling_depth_yields_to_the_corners():
+    """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):
+    over the distances seen its slope reads as a depth scale of a few percent, which the depth
+    alone puts in the focal length. Where the corners see that level, a scale term with it as
+    its prior takes it: over six seeds the focal error is a fraction of the offset-only model's."""
+    ours, offset_only = [], []
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
+        views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 6, 16, seed=100 * seed + 5, noise=noise)
+        res = calibrate(views, BOARD)
+        ours.append(abs(res.K[0, 0] / F - 1))
+        offset_only.append(abs(calibrate(views, BOARD, depth_bias="offset").K[0, 0] / F - 1))
+        assert res.to_dict()["model"]["depth_bias"] == res.model.depth_bias   # the result carries its model
+    assert np.median(ours) < 0.003 and np.median(ours) < 0.5 * np.median(offset_only), (ours, offset_only)

@@ -97,8 +97,7 @@ class Problem:
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
                  sigma_depth: np.ndarray, free_global, free_poses: bool = True,
-                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None,
-                 depth_excess: np.ndarray | None = None):
+                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None):
         self.n_views = len(views)
         self.convention = convention
         self.free_global = np.asarray(free_global, dtype=int)
@@ -111,14 +110,6 @@ class Problem:
         self.has_depth = np.isfinite(self.depth)
         self.pixel_scale = w / np.asarray(sigma_px)[self.view]
         self.depth_scale = (w / np.asarray(sigma_depth)[self.view])[self.has_depth]
-        # A view's depth error common to all its corners (``depth_excess``, m): the residuals'
-        # covariance is s^2 I + e^2 11^T, whitened by taking beta of the view's mean out.
-        self.depth_view = self.view[self.has_depth]
-        self.depth_count = np.maximum(np.bincount(self.depth_view, minlength=self.n_views), 1)
-        self.beta = None
-        if depth_excess is not None:
-            s_j, n_j = np.asarray(sigma_depth, dtype=float), self.depth_count
-            self.beta = (1 - s_j / np.sqrt(s_j ** 2 + n_j * np.asarray(depth_excess) ** 2))[self.depth_view]
         self.priors = [i for i in self.free_global.tolist() if i >= N_INTRINSICS]
         self.prior_sigma = depth_bias.PRIOR_SIGMA if prior_sigma is None else prior_sigma
 
@@ -164,26 +155,17 @@ class Problem:
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
 
-    def _decorrelate(self, rows: np.ndarray) -> np.ndarray:
-        """Depth residuals (or Jacobian rows) less beta of their view's mean."""
-        if self.beta is None:
-            return rows
-        flat = rows.reshape(len(rows), -1)
-        means = np.stack([np.bincount(self.depth_view, flat[:, k], self.n_views) for k in range(flat.shape[1])], 1)
-        out = flat - self.beta[:, None] * (means / self.depth_count[:, None])[self.depth_view]
-        return out.reshape(rows.shape)
-
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
         """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
         dpix, ddep, jp, jd = self.raw(state, jac)
         prior = np.array([state.bias[i - N_INTRINSICS] / self.prior_sigma[i - N_INTRINSICS]
                           for i in self.priors])
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
-                            self._decorrelate(ddep[self.has_depth]) * self.depth_scale, prior])
+                            ddep[self.has_depth] * self.depth_scale, prior])
         if not jac:
             return r, None
         rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
-                               self._decorrelate(jd[self.has_depth]) * self.depth_scale[:, None]])
+                               jd[self.has_depth] * self.depth_scale[:, None]])
         view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth]])
         g = rows[:, self.free_global]
         pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
@@ -304,23 +286,17 @@ def _robust_sigma(values: np.ndarray, floor: float) -> float:
 
 def solve(views: list[Observations], state: State, convention: str, free_global, free_poses: bool = True,
           rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
-          max_iter: int = 100, depth_excess: np.ndarray | None = None,
-          prior_sigma: np.ndarray | None = None) -> Fit:
+          max_iter: int = 100, prior_sigma: np.ndarray | None = None) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
     normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners.
-    ``depth_excess`` (m, per view): an error of each view's depth as a whole, beyond its noise,
-    that the depth model does not explain; it lowers the weight of the view's depth level, which
-    is what holds the focal length, and so lets the corners take over, while the depth's shape
-    over the view (its tilt, which holds the principal point) keeps its weight. ``prior_sigma``: the
-    depth terms' priors, where not the defaults."""
+    ``prior_sigma``: the depth terms' priors, where not the defaults."""
     n = len(views)
     sigma_px = np.ones(n)
     sigma_d = np.full(n, 0.01)
     weights = None
     total_it = 0
     for _ in range(rounds):
-        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma,
-                          depth_excess)
+        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
         dpix, ddep, _, _ = problem.raw(state)
@@ -341,8 +317,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
-    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma,
-                      depth_excess)
+    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.

@@ -121,7 +121,11 @@ def pose_from_points(object_points: np.ndarray, points: np.ndarray) -> np.ndarra
 def pose_from_pixels(object_points: np.ndarray, pixels: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
     """Pose (rvec, tvec) of a view with no usable depth, from its corners alone."""
     K, D = split_intrinsics(intrinsics)
-    ok, rvec, tvec = cv2.solvePnP(object_points, pixels, K, D)
+    try:   # OpenCV wants contiguous arrays
+        ok, rvec, tvec = cv2.solvePnP(np.ascontiguousarray(object_points, dtype=float),
+                                      np.ascontiguousarray(pixels, dtype=float), K, D)
+    except cv2.error:
+        ok = False
     if not ok:
         raise CalibrationError("a view's pose could not be found from its corners")
     return np.r_[rvec.ravel(), tvec.ravel()]

@@ -51,6 +51,7 @@ MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image s
 BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
 MIN_BLACK_PIXELS = 30
 EXCESS_SIGMAS = 5.0  # a depth level this many standard errors from the corners' is a depth scale
+CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
 
 
@@ -497,15 +498,14 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
 
 
 def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say,
-           excess: np.ndarray | None = None, prior: np.ndarray | None = None):
+           prior: np.ndarray | None = None):
     """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
     hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
     noiseless data exact). Returns the fit, the corner depths and the planes."""
     convention = options.depth_convention
     for _ in range(MAX_OUTER_ROUNDS):
         before = np.r_[state.intrinsics, state.bias]
-        fit = bundle.solve(observations, state, convention, free, loss=options.loss, depth_excess=excess,
-                           prior_sigma=prior)
+        fit = bundle.solve(observations, state, convention, free, loss=options.loss, prior_sigma=prior)
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
@@ -524,7 +524,7 @@ def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[fl
     range, kept when an F-test finds it (so views that merely scatter, from causes that do not
     follow the distance, do not count). Returns its RMS (relative) and the F statistic."""
     n = len(r)
-    if n < 5:
+    if n < 5 or np.ptp(z) <= 0.05 * np.mean(z):
         return None
     t = (z - z.mean()) / max(np.ptp(z), 1e-9)
     base = np.column_stack([np.ones(n), 1 / z])
@@ -537,46 +537,64 @@ def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[fl
     f_stat = (chi2[0] - chi2[1]) / 2 / max(chi2[1] / dof, 1.0)
     if f_stat <= scipy_f.ppf(1 - STRUCTURE_P, 2, dof):
         return None
-    shape = full[:, 2:] @ fits[1][2:]
-    return float(np.sqrt(np.mean((shape - shape.mean()) ** 2))), float(f_stat)
+    shape = full @ fits[1] - base @ fits[0]   # what the distance terms add to the offset's fit
+    return float(np.sqrt(np.mean(shape ** 2))), float(f_stat)
 
 
 @dataclass
 class _DepthCheck:
-    excess: np.ndarray | None = None      # m, per view: depth error beyond the noise
     scale_prior: float | None = None      # the depth scale's prior sigma, when the corners call for one
     reasons: list[str] = field(default_factory=list)
 
 
-def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
-                 obj: list[np.ndarray], corner_fit: bundle.Fit | None, convention: str) -> _DepthCheck:
-    """Each view's depth error beyond its noise that the depth model does not explain, and the
-    depth's scale as far as the corners can tell it.
+def _corner_focal_spread(obj: list[np.ndarray], prepared: list[_Prepared], image_size: tuple[int, int],
+                         folds: int = CORNER_FOLDS) -> float:
+    """The corners-alone focal length's jackknife spread over ``folds`` groups of the views,
+    relative (inf where a fold cannot be calibrated)."""
+    n = len(prepared)
+    groups = [np.arange(n)[k::min(folds, n)] for k in range(min(folds, n))]
+    fx = []
+    for g in groups:
+        keep = [i for i in range(n) if i not in set(g)]
+        try:
+            fx.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
+                                       image_size).intrinsics[0])
+        except CalibrationError:
+            return float("inf")
+    fx = np.array(fx)
+    m = len(fx)
+    return float(np.sqrt((m - 1) / m * np.sum((fx - fx.mean()) ** 2)) / fx.mean())
 
-    The depth holds the focal length through each view's distance: the corners alone give
-    that distance up to the focal length (the board's size in the image; with the corners' own
-    calibration ``corner_intr``, which the depth did not shape), the depth gives it in metres.
-    Their ratio must be the same for every view, up to the offset the model removes; a ToF
-    wiggling error (or any error that varies with distance) makes it vary beyond what the
-    corner and plane noise allow. That spread, estimated from the views, is each view's excess
-    depth error: with it the depth weighs as much as it deserves, and the corners take over
-    where it deserves little. A level common to every ratio is a depth scale (the slope of a
-    wiggling error over the distances seen, a square size or depth unit a little off) or a
-    bias of the corners: within MAX_CORNER_DEPTH_DISAGREEMENT, and when the corners fix it
-    better than the level itself, the depth gets a scale term whose prior is that level, so
-    the focal length rests on both by their merits; beyond it the verdict refuses."""
+
+def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
+                 obj: list[np.ndarray], corner_fit: bundle.Fit | None, convention: str,
+                 image_size: tuple[int, int]) -> _DepthCheck:
+    """What the corners can tell of the depth: the distance of each view from the corners alone
+    (the board's size in the image, with the corners' own calibration, which the depth did not
+    shape) against its distance from the depth.
+
+    Their ratio must be the same for every view, up to the offset the model removes. A level
+    common to every ratio is a depth scale (the slope of a wiggling error over the distances
+    seen, a square size or depth unit a little off) or a bias of the corners: within
+    MAX_CORNER_DEPTH_DISAGREEMENT, and when the corners fix it better than the level itself
+    (their covariance and their spread over folds of the views), the depth gets a scale term
+    whose prior is that level, so the focal length rests on both by their merits; beyond it
+    the verdict refuses. A ratio that follows the distance (a ToF wiggling error) is reported."""
     check = _DepthCheck()
     if corner_fit is None:
         return check
     K, D = split_intrinsics(corner_fit.state.intrinsics)
     bias = fit.state.bias
     ratio, sigma, dist = [], [], []
-    distance = np.zeros(len(prepared))
     for j, (v, d, o, plane) in enumerate(zip(prepared, depths, obj, planes)):
         if plane is None or not np.isfinite(d).all():
             continue
-        ok, rvec, tvec = cv2.solvePnP(o, v.corners, K, D, fit.state.poses[j, :3].copy(), fit.state.poses[j, 3:].copy(),
-                                      useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        try:
+            ok, rvec, tvec = cv2.solvePnP(o, np.ascontiguousarray(v.corners), K, D, fit.state.poses[j, :3].copy(),
+                                          fit.state.poses[j, 3:].copy(), useExtrinsicGuess=True,
+                                          flags=cv2.SOLVEPNP_ITERATIVE)
+        except cv2.error:   # a view OpenCV cannot pose from its corners alone says nothing here
+            continue
         if not ok:
             continue
         X = transform_views(np.r_[rvec.ravel(), tvec.ravel()][None], o, np.zeros(len(o), dtype=int))[0]
@@ -586,7 +604,6 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         spread_px = np.sqrt(np.mean(np.sum((v.corners - v.corners.mean(0)) ** 2, axis=1)))
         px = max(float(np.sqrt(np.mean(fit.pixel_residuals[j] ** 2))), bundle.MIN_NOISE[0])
         plane_se = max(float(np.median(corner_depth_along(plane, u)[1])), bundle.MIN_NOISE[1])
-        distance[j] = from_pixels
         ratio.append(from_depth / from_pixels - 1)
         sigma.append(np.hypot(px / (spread_px * np.sqrt(len(o) / 2)), plane_se / from_depth))
         dist.append(from_pixels)
@@ -594,26 +611,29 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
     if n < 3:
         return check
     r, s, z = np.array(ratio), np.array(sigma), np.array(dist)
-    A = np.column_stack([np.ones(n), 1 / z])
+    # views all at one distance cannot tell a scale from an offset: then the level is both
+    A = np.column_stack([np.ones(n), 1 / z]) if np.ptp(z) > 0.05 * np.mean(z) else np.ones((n, 1))
     coef, *_ = np.linalg.lstsq(A / s[:, None], r / s, rcond=None)
     res = r - A @ coef
-    dof = n - 2
+    dof = n - A.shape[1]
     structure = _distance_structure(r, s, z)
-    if structure is not None:
+    if structure is not None:   # reported, not corrected: on a real Kinect the corners were the worse
         tau, f_stat = structure
         s = np.hypot(s, tau)
-        check.excess = tau * distance
         check.reasons.append(
             f"the ratio of the views' distances from the depth and from the corners varies with the distance "
             f"({tau:.2%} RMS, F = {f_stat:.0f}): a depth error over distance the model does not explain (ToF "
-            "wiggling?); each view's depth level weighs that much less")
-    # the level at the views' mean distance, with the corners' own focal-length uncertainty
+            "wiggling?)")
+    # the level (a scale: the offset's b / z aside), with the corners' own focal-length uncertainty
     Aw = A / s[:, None]
-    cov = np.linalg.inv(Aw.T @ Aw) * max(float(np.sum((res / s) ** 2)) / max(dof, 1), 1.0)
-    at = np.array([1.0, np.mean(1 / z)])
-    level = float(at @ coef)
+    cov = np.linalg.pinv(Aw.T @ Aw) * max(float(np.sum((res / s) ** 2)) / max(dof, 1), 1.0)
+    level = float(coef[0])
     corner_rel = corner_fit.covariance[0, 0] ** 0.5 / corner_fit.state.intrinsics[0]
-    level_sigma = float(np.hypot(np.sqrt(at @ cov @ at), corner_rel))
+    level_sigma = float(np.hypot(np.sqrt(cov[0, 0]), corner_rel))
+    if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
+        # the corners' focal length can rest on a view or two (a real Kinect set moves it 2 %
+        # with one view): their spread over folds of the views, not only their covariance
+        level_sigma = float(np.hypot(level_sigma, _corner_focal_spread(obj, prepared, image_size)))
     if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         check.scale_prior = abs(level)
         check.reasons.append(
@@ -720,20 +740,17 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if squares_reason:
         model.reasons.append(squares_reason)
     fit, depths, planes = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
-    check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention) \
+    check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
         model.reasons.append(why)
         say(why)
-    if check.reasons:
-        prior = None
-        if check.scale_prior is not None:
-            free = sorted(free + [N_INTRINSICS + 1])
-            prior = bias_model.PRIOR_SIGMA.copy()
-            prior[1] = check.scale_prior
-            model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
-        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say,
-                                     check.excess, prior)
+    if check.scale_prior is not None:
+        free = sorted(free + [N_INTRINSICS + 1])
+        prior = bias_model.PRIOR_SIGMA.copy()
+        prior[1] = check.scale_prior
+        model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
+        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say, prior)
     result = _result(options, model, board, image_size, fit, prepared, planes, rejected, notes, corner_fit)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
