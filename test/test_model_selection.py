@@ -78,5 +78,6 @@ def test_a_wiggling_depth_yields_to_the_corners():
         res = calibrate(views, BOARD)
         ours.append(abs(res.K[0, 0] / F - 1))
         offset_only.append(abs(calibrate(views, BOARD, depth_bias="offset").K[0, 0] / F - 1))
-        assert res.to_dict()["model"]["depth_bias"] == res.model.depth_bias   # the result carries its model
+        doc = res.to_dict()   # the result carries its model, and each view's plane as data
+        assert doc["model"]["depth_bias"] == res.model.depth_bias and len(doc["views"][0]["plane"]) == 3
     assert np.median(ours) < 0.003 and np.median(ours) < 0.5 * np.median(offset_only), (ours, offset_only)

@@ -299,7 +299,8 @@ def _report(views: list[_Prepared], fit: bundle.Fit, planes: list[Plane] | None)
             float(np.sqrt(np.mean(np.sum(pix ** 2, axis=1)))),
             float(np.sqrt(np.mean(fin ** 2))) if fin.size else float("nan"), pix, dep,
             planes[j].sigma if planes and planes[j] else float("nan"),
-            len(planes[j].pixels) if planes and planes[j] else 0))
+            len(planes[j].pixels) if planes and planes[j] else 0,
+            planes[j].coef.copy() if planes and planes[j] else None))
     return out
 
 

@@ -38,6 +38,7 @@ class ViewReport:
     depth_residuals: np.ndarray   # (N,)
     plane_sigma: float = float("nan")   # m, noise of the white-square depth about its plane
     plane_pixels: int = 0
+    plane: np.ndarray | None = None     # the depth plane, coef . X = 1 in the camera frame (see planarize.Plane)
 
 
 @dataclass
@@ -155,6 +156,7 @@ class CalibrationResult:
                 "index": v.index, "rvec": v.rvec.tolist(), "tvec": v.tvec.tolist(),
                 "pixel_rms": v.pixel_rms, "depth_rms_m": v.depth_rms,
                 "plane_sigma_m": v.plane_sigma, "plane_pixels": v.plane_pixels,
+                "plane": None if v.plane is None else v.plane.tolist(),
                 "pixel_residuals": v.pixel_residuals.tolist(),
                 "depth_residuals_m": np.where(np.isfinite(v.depth_residuals), v.depth_residuals, None).tolist(),
             } for v in self.views],
