@@ -385,7 +385,8 @@ options = st.fixed_dictionaries({}, optional={
     "method": st.one_of(st.sampled_from(["depth", "traditional"]), words),
     "depth_units": st.one_of(st.floats(), st.sampled_from([None, 0, -1, 1, "mm", True, 1e-300, 1e300])),
     "depth_bias": st.one_of(st.sampled_from(["none", "offset", "offset+tilt", "offset+scale+tilt"]), words),
-    "distortion": st.one_of(st.sampled_from(["auto", "none", "k1", "plumb_bob"]), words),
+    # (the lens has k1: "none" forced on it is the known defect tested below)
+    "distortion": st.one_of(st.sampled_from(["auto", "k1", "plumb_bob"]), words),
     "loss": st.one_of(st.sampled_from([None, "huber", "cauchy"]), words),
     "min_views": st.one_of(st.integers(-2, 6), st.integers(10 ** 6, 10 ** 20),
                            st.sampled_from([2.5, 3.0, "3", None, math.nan, True])),
@@ -414,6 +415,14 @@ def test_calibrate_options_work_or_raise_calibration_error(views, kwargs):
                    "corners' check and the verdict (5 sigma, 5 % floor) let the rest through")
 def test_a_wrong_depth_convention_is_not_trusted(views):
     result = calibrate(views, BOARD, depth_convention="radial")
+    assert not result.ok or result.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
+
+
+@pytest.mark.xfail(strict=True, reason="known defect (issue 12's closing note): distortion='none' forced on "
+                   "a lens with k1 = -0.1 is trusted 1.9 % off; its pixel RMS (0.055 px) is far above the "
+                   "corners-alone fit's but under the verdict's 1 px")
+def test_a_model_without_the_lens_distortion_is_not_trusted(views):
+    result = calibrate(views, BOARD, distortion="none")
     assert not result.ok or result.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
 
 
