@@ -13,19 +13,17 @@ from typing import Any
 
 from .calibration_file import CAMERA_NAME
 from .collector import CollectorConfig
-from .core import depth_bias
 from .core.board import MAX_CORNERS_PER_SIDE, MAX_SQUARE_M, MIN_CORNERS_PER_SIDE, MIN_SQUARE_M
 from .core.camera import DEPTH_CONVENTIONS
 from .core.errors import CalibrationError
-from .core.options import DISTORTION_TERMS, PLANE_SQUARES
+from .core.options import DISTORTION_TERMS, PLANE_SQUARES, CalibrationOptions
 
 LOSSES = ("none", "huber", "cauchy")
 
 
 def _depth_model(value: str) -> str | None:
     try:
-        if value != "auto":
-            depth_bias.parse(value)
+        CalibrationOptions(depth_bias=value)   # calibrate's own check
     except CalibrationError as exc:
         return str(exc)
     return None

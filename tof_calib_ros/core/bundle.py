@@ -342,5 +342,4 @@ def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
 def n_observations(views: list[Observations]) -> float:
     """Independent measurements the views hold: two per corner, and each view's depth as many
     as it is worth (a plane's three), for an information criterion."""
-    return float(sum(2 * len(v.pixels) + (min(np.isfinite(v.depth).sum(), v.depth_dof or np.inf)
-                                          if np.isfinite(v.depth).any() else 0) for v in views))
+    return float(sum(2 * len(v.pixels) + min(np.isfinite(v.depth).sum(), v.depth_dof or np.inf) for v in views))

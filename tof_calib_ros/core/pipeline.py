@@ -52,6 +52,7 @@ BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from
 MIN_BLACK_PIXELS = 30
 EXCESS_SIGMAS = 5.0  # a depth level this many standard errors from the corners' is a depth scale
 CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
+MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are at one distance
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
 
 
@@ -519,13 +520,18 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
     return fit, depths, planes
 
 
+def _one_distance(z: np.ndarray) -> bool:
+    """Whether the views' distances spread too little to tell a scale from an offset."""
+    return bool(np.ptp(z) <= MIN_DISTANCE_SPREAD * np.mean(z))
+
+
 def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[float, float] | None:
     """How much of the views' depth-to-corner distance ratios ``r`` (standard errors ``s``) is a
     smooth function of the distance ``z`` beyond the offset's a + b / z: a quadratic over the
     range, kept when an F-test finds it (so views that merely scatter, from causes that do not
     follow the distance, do not count). Returns its RMS (relative) and the F statistic."""
     n = len(r)
-    if n < 5 or np.ptp(z) <= 0.05 * np.mean(z):
+    if n < 5 or _one_distance(z):
         return None
     t = (z - z.mean()) / max(np.ptp(z), 1e-9)
     base = np.column_stack([np.ones(n), 1 / z])
@@ -556,7 +562,7 @@ def _corner_focal_spread(obj: list[np.ndarray], prepared: list[_Prepared], image
     groups = [np.arange(n)[k::min(folds, n)] for k in range(min(folds, n))]
     fx = []
     for g in groups:
-        keep = [i for i in range(n) if i not in set(g)]
+        keep = np.setdiff1d(np.arange(n), g)
         try:
             fx.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
                                        image_size).intrinsics[0])
@@ -613,7 +619,7 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         return check
     r, s, z = np.array(ratio), np.array(sigma), np.array(dist)
     # views all at one distance cannot tell a scale from an offset: then the level is both
-    A = np.column_stack([np.ones(n), 1 / z]) if np.ptp(z) > 0.05 * np.mean(z) else np.ones((n, 1))
+    A = np.ones((n, 1)) if _one_distance(z) else np.column_stack([np.ones(n), 1 / z])
     coef, *_ = np.linalg.lstsq(A / s[:, None], r / s, rcond=None)
     res = r - A @ coef
     dof = n - A.shape[1]
@@ -675,6 +681,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     first = trad.intrinsics if trad is not None else guess
     sampled = "all" if options.plane_squares == "auto" else options.plane_squares
     samples: list[DepthSamples | None] = []
+    white_inliers: list[np.ndarray | None] = []
     first_planes, black_offsets = [], []
     for v in prepared:
         try:
@@ -684,9 +691,11 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             if offset is not None:
                 black_offsets.append(offset)
             samples.append(smp)
+            white_inliers.append(plane.inliers)
             first_planes.append(plane)
         except CalibrationError as exc:
             samples.append(None)
+            white_inliers.append(None)
             notes.append(f"view {v.index}: {exc}; used for its corners only")
             say(notes[-1])
     if not first_planes:
@@ -699,11 +708,14 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         apart, squares_reason = _black_reads_apart(black_offsets)
         squares = "white" if apart else "all"
         say(squares_reason)
-    # RANSAC once on the chosen squares; its inliers are the view's samples from here on.
+    # The RANSAC inliers of the chosen squares are the view's samples from here on (the white
+    # squares' were found above).
     for k, smp in enumerate(samples):
         if smp is not None:
-            chosen = smp if squares == "all" else smp.subset(~smp.black)
-            samples[k] = chosen.subset(fit_samples(chosen, first, convention, ransac=True).inliers)
+            if squares == "all":
+                samples[k] = smp.subset(fit_samples(smp, first, convention, ransac=True).inliers)
+            else:
+                samples[k] = smp.subset(~smp.black).subset(white_inliers[k])
     plane_samples = _PlaneSamples(samples, image_size[0])
     # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better;
     # distortion starts at none (OpenCV's, from few corners, can be wild) unless it was asked for.
