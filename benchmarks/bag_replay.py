@@ -46,6 +46,7 @@ def measure(bag: Path, workers: int) -> dict:
     from tof_calib_ros import Board
     from tof_calib_ros.bag_io import BagSource
     from tof_calib_ros.replay import Replay
+    from tof_calib_ros.ros_processes import tree_memory_mb
     from tof_calib_ros.settings import collector_config, defaults
 
     me = psutil.Process()
@@ -58,8 +59,7 @@ def measure(bag: Path, workers: int) -> dict:
             try:
                 children = me.children(recursive=True)
                 main_rss = me.memory_info().rss
-                # proportional set size: pages the workers share with the fork server count once
-                total = me.memory_full_info().pss + sum(c.memory_full_info().pss for c in children)
+                total = tree_memory_mb(me.pid) * 2**20
                 for c in children:
                     t = c.cpu_times()
                     cpu[c.pid] = t.user + t.system

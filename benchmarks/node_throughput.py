@@ -23,7 +23,8 @@ data, best effort). Fast DDS is tuned for large frames (see FASTDDS_PROFILE) unl
   100 ms. Also measured: the reply with no stream, and the time from the node's last file
   written (calibration.yaml's mtime) to the reply, i.e. the service's own overhead. The three are
   taken in turns, medians of 5 (2 with ``--quick``).
-- Memory: the node's resident memory after 1,000 and 10,000 processed frames at 200x200, with
+- Memory: the node's memory (proportional set size, with its worker) after 1,000 and 10,000
+  processed frames at 200x200, with
   ``views.max`` reached early; target: flat once the views are full (slope < 1 MB per 1,000
   frames, i.e. under 1 KB a frame where one leaked frame is 80 KB).
 - Per-frame cost, offline in this process on the same frames, stage by stage as the node's
@@ -128,13 +129,13 @@ CAMERAS = (Camera("200x200 (PMD)", sim.pmd_camera, (30.0, 45.0, 60.0, 90.0), 45.
 
 @dataclass(frozen=True)
 class Sample:
-    """One diagnostics message of the node, with its resident memory when it arrived."""
+    """One diagnostics message of the node, with its memory (PSS) when it arrived."""
 
     t: float           # the message's stamp (the node's clock, which is the wall clock)
     frames: int        # pairs the view collector judged since the last ~/reset
     views: int
     dropped: int       # pairs the worker's queue dropped since start
-    rss_mb: float
+    memory_mb: float
 
 
 class BenchmarkError(RuntimeError):
@@ -274,13 +275,13 @@ class NodeUnderTest:
         from diagnostic_msgs.msg import DiagnosticArray
         from std_srvs.srv import Trigger
 
-        from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, logs, tree_rss_mb, wait_until
+        from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, logs, tree_memory_mb, wait_until
 
         self.ns, self.spinner, self.out = ns, spinner, workdir / ns.strip("/") / "out"
         self.proc = NodeProcess("calibration_node", ["-r", f"__ns:={ns}", *BOARD_ARGS, "-p", f"output_dir:={self.out}",
                                                      *args], workdir, env)
         # the launcher execs Python, so the pid is the node's; with its calibration worker
-        self._memory = lambda: tree_rss_mb(self.proc.proc.pid)
+        self._memory = lambda: tree_memory_mb(self.proc.proc.pid)
         self.samples: list[Sample] = []
         self._status = f"{ns}/calibration_node:"
         node = spinner.node
@@ -453,7 +454,7 @@ def latency(node: NodeUnderTest, camera: sim.SimCamera, rate: float, pool_size: 
 
 
 def memory(node: NodeUnderTest, rate: float, checkpoints: tuple[int, ...], log) -> dict:
-    """The node's RSS at the first diagnostics past each processed-frame checkpoint; the slope
+    """The node's memory (PSS) at the first diagnostics past each processed-frame checkpoint; the slope
     (MB per 1,000 frames) fitted over the samples once the views are full."""
     start = node.reset()
     node.offer.start(rate)
@@ -465,18 +466,18 @@ def memory(node: NodeUnderTest, rate: float, checkpoints: tuple[int, ...], log) 
     at = {}
     for n in checkpoints:
         s = next(s for s in samples if s.frames >= n)
-        at[n] = {"frames": s.frames, "views": s.views, "rss MB": s.rss_mb}
+        at[n] = {"frames": s.frames, "views": s.views, "memory MB": s.memory_mb}
     full = next((s.frames for s in samples if s.views >= MEMORY_VIEWS_MAX), None)
     fit = [s for s in samples if s.frames >= checkpoints[0] and full is not None and s.frames >= full]
-    slope = float(np.polyfit([s.frames / 1000 for s in fit], [s.rss_mb for s in fit], 1)[0]) \
+    slope = float(np.polyfit([s.frames / 1000 for s in fit], [s.memory_mb for s in fit], 1)[0]) \
         if len(fit) >= 3 else None
     out = {"rate": rate, "views.max": MEMORY_VIEWS_MAX, "views full at frame": full,
-           "rss MB at start": samples[0].rss_mb, "at": at, "slope MB per 1000 frames": slope,
-           "max rss MB": max(s.rss_mb for s in samples),
+           "memory MB at start": samples[0].memory_mb, "at": at, "slope MB per 1000 frames": slope,
+           "max memory MB": max(s.memory_mb for s in samples),
            "window": node.window(start + WARMUP_S, samples[-1].t), "load": os.getloadavg()}
     # flat: less than 1 KB a frame, far below one leaked frame (80 KB at 200x200)
     out["met"] = slope is not None and slope < 1.0
-    log("  " + ", ".join(f"{v['frames']} frames: {v['rss MB']:.1f} MB" for v in at.values())
+    log("  " + ", ".join(f"{v['frames']} frames: {v['memory MB']:.1f} MB" for v in at.values())
         + (f"; slope {slope:+.3f} MB per 1000 frames" if slope is not None else ""))
     return out
 
@@ -579,10 +580,10 @@ def print_tables(report: dict) -> None:
         m = e["memory"]
         print(f"\nnode memory, {name}, {m['rate']:g} pairs/s offered ({m['window']['processed']:.1f} processed), "
               f"views.max {m['views.max']} (full at frame {m['views full at frame']})")
-        print(f"{'frames':>8}{'views':>7}{'RSS MB':>9}")
-        print(f"{0:8d}{0:7d}{m['rss MB at start']:9.1f}")
+        print(f"{'frames':>8}{'views':>7}{'PSS MB':>9}")
+        print(f"{0:8d}{0:7d}{m['memory MB at start']:9.1f}")
         for v in m["at"].values():
-            print(f"{v['frames']:8d}{v['views']:7d}{v['rss MB']:9.1f}")
+            print(f"{v['frames']:8d}{v['views']:7d}{v['memory MB']:9.1f}")
         slope = m["slope MB per 1000 frames"]
         print(f"slope after the views are full: {slope:+.3f} MB per 1000 frames (flat: < 1): "
               f"{'met' if m['met'] else 'NOT met'}" if slope is not None else "slope: too few samples")

@@ -15,8 +15,9 @@ publishes bursts of malformed frames of every kind on the same topics. Counted: 
 malformed frames injected per kind, calls made and answered per service, every published
 CameraInfo checked for NaN, the files checked after every call (a successful calibration must
 leave whole files that pass the verdict; a failed one must leave them byte for byte), the
-node's resident memory over time. Data lost (must be 0) = calls not answered + files damaged or
-changed by a failed calibration + published CameraInfos with NaN + the node dying.
+node's memory over time (the proportional set size of it, its worker and fork server). Data
+lost (must be 0) = calls not answered + files damaged or changed by a failed calibration +
+published CameraInfos with NaN + the node dying.
 
 Fuzz: ``decode_image`` and ``read_camera_yaml`` on random inputs: each must work or raise our
 own clear error (``CalibrationError``), nothing else.
@@ -104,7 +105,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     from sensor_msgs.msg import CameraInfo, Image
     from std_srvs.srv import Trigger
 
-    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, tree_rss_mb, wait_until
+    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, tree_memory_mb, wait_until
     from tof_calib_ros.ros_processes import answered as is_answered
 
     rnd = random.Random(seed)
@@ -185,7 +186,7 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         while time.monotonic() < end:
             now = time.monotonic()
             if now >= next_sample:
-                memory.append((now, tree_rss_mb(node.proc.pid)))   # the node and its calibration worker
+                memory.append((now, tree_memory_mb(node.proc.pid)))   # the node and its calibration worker
                 next_sample = now + 5.0
             if now >= next_burst:
                 for _ in range(20):
@@ -227,8 +228,8 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     answered = sum(c["answered"] for c in calls.values())
     made = sum(c["made"] for c in calls.values())
     t = np.array([m[0] for m in memory]) - (memory[0][0] if memory else 0.0)
-    rss = np.array([m[1] for m in memory])
-    half = rss[t >= t[-1] / 3] if len(rss) else rss   # after the views are full
+    mb = np.array([m[1] for m in memory])
+    half = mb[t >= t[-1] / 3] if len(mb) else mb   # after the views are full
     slope = float(np.polyfit(t[t >= t[-1] / 3] / 60.0, half, 1)[0]) if len(half) >= 3 else float("nan")
     frames = minutes * 60.0 * 30.0
     return {
@@ -237,8 +238,8 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         "answer latency s (median, max)": [float(np.median(latencies)) if latencies else None,
                                            float(np.max(latencies)) if latencies else None],
         "camera_info": infos, "files": damage, "node alive at the end": alive, "events": events,
-        "rss MB (first, after views full, end)": [float(rss[0]), float(half[0]), float(rss[-1])] if len(rss) else [],
-        "rss slope after views full, MB/min": slope,
+        "memory MB (first, after views full, end)": [float(mb[0]), float(half[0]), float(mb[-1])] if len(mb) else [],
+        "memory slope after views full, MB/min": slope,
         "data lost": (made - answered) + sum(damage.values()) + infos["with_nan"] + int(not alive),
     }
 
@@ -550,7 +551,7 @@ def main() -> int:
         for s, c in soaked["calls"].items():
             print(f"{s:<12}{c['made']:>6}{c['answered']:>10}{c['succeeded']:>11}")
         for key in ("events", "answer latency s (median, max)", "camera_info", "files", "node alive at the end",
-                    "rss MB (first, after views full, end)", "rss slope after views full, MB/min", "data lost"):
+                    "memory MB (first, after views full, end)", "memory slope after views full, MB/min", "data lost"):
             print(f"{key}: {soaked[key]}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"faults": faulted, "fuzz": fuzzed, "soak": soaked, "load": os.getloadavg()},

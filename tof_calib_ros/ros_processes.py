@@ -106,8 +106,10 @@ class NodeProcess:
         return self.proc.returncode
 
 
-def tree_rss_mb(pid: int) -> float:
-    """Resident memory of a process and all it started (the node's calibration worker), MB."""
+def tree_memory_mb(pid: int) -> float:
+    """Memory of a process and all it started (the node's calibration worker and its fork
+    server), MB: the proportional set size, so that pages a forked worker shares with its
+    parent count once (their resident sizes would count them twice)."""
     import psutil
 
     try:
@@ -118,7 +120,7 @@ def tree_rss_mb(pid: int) -> float:
     total = 0
     for p in processes:
         try:
-            total += p.memory_info().rss
+            total += p.memory_full_info().pss
         except psutil.NoSuchProcess:   # ended meanwhile
             pass
     return total / 2**20
