@@ -55,10 +55,10 @@ import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.calibration_file import load_views
-from tof_calib_ros.collector import CollectorConfig, ViewCollector
+from tof_calib_ros.collect.collector import CollectorConfig, ViewCollector
+from tof_calib_ros.collect.tracking import BoardTracker, quick_locate
 from tof_calib_ros.image_decode import decode_image, depth_to_metres
 from tof_calib_ros.output_folder import write_calibration
-from tof_calib_ros.tracking import BoardTracker, quick_locate
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BOARD = Board(5, 7, 0.03)

@@ -18,7 +18,7 @@ from tof_calib_ros.bag_io import (
     TopicError,
     choose_topics,
 )
-from tof_calib_ros.replay import FrameError, Skip
+from tof_calib_ros.collect.replay import FrameError, Skip
 
 AMP, DEPTH, INFO = "/tof/amplitude/image_raw", "/tof/depth/image_raw", "/tof/camera_info"
 K = np.array([[280.0, 0, 99.5], [0, 281.0, 100.5], [0, 0, 1]])
@@ -326,7 +326,7 @@ def test_any_sequence_of_messages_gives_frames_or_named_skips(tmp_path_factory):
     and a frame decodes to equal-sized finite-or-NaN images or raises FrameError."""
     from hypothesis import given, settings
 
-    from tof_calib_ros.replay import SKIP_KINDS
+    from tof_calib_ros.collect.replay import SKIP_KINDS
 
     @settings(max_examples=60, deadline=None)
     @given(_hostile_messages())

@@ -5,8 +5,9 @@ import cv2
 import numpy as np
 import pytest
 
-from tof_calib_ros import Board, calibrate, collector, motion, sim, tracking
-from tof_calib_ros.collector import AXES, CollectorConfig, ViewCollector
+from tof_calib_ros import Board, calibrate, sim
+from tof_calib_ros.collect import collector, motion, tracking
+from tof_calib_ros.collect.collector import AXES, CollectorConfig, ViewCollector
 from tof_calib_ros.core.camera import rays
 
 BOARD = Board(8, 6, 0.04)

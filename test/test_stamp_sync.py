@@ -1,7 +1,7 @@
 """Pairing amplitude and depth frames by stamp."""
 import pytest
 
-from tof_calib_ros.stamp_sync import StampSync
+from tof_calib_ros.collect.stamp_sync import StampSync
 
 
 def test_pairs_within_slop_in_either_order():

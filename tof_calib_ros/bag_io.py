@@ -27,10 +27,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from .bag_salvage import McapSalvage, SqliteSalvage, storage_files
 from .calibration_file import monocular_fields
+from .collect.replay import FrameError, Skip
+from .collect.stamp_sync import StampSync
 from .core.errors import CalibrationError
 from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
-from .replay import FrameError, Skip
-from .stamp_sync import StampSync
 
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"

@@ -27,10 +27,10 @@ from . import Board, CalibrationError, calibrate
 from .bag_io import STORAGES, BagError, BagSource, TopicError
 from .calibration_file import CalibrationFileError, write_json
 from .check import check_views, load_calibration
-from .collector import AXES, ViewCollector
+from .collect.collector import AXES, ViewCollector
+from .collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from .image_folder import is_image_folder, scan
 from .output_folder import write_calibration
-from .replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from .settings import SETTINGS, calibration_options, collector_config, defaults, refusal
 from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 

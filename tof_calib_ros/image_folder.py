@@ -18,9 +18,9 @@ import cv2
 import numpy as np
 
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
+from .collect.replay import FrameError, Skip
 from .core.pipeline import depth_in_metres
 from .image_decode import ImageTooLarge, check_pixels
-from .replay import FrameError, Skip
 
 EXTENSIONS = (".png", ".tif", ".tiff", ".npy")
 AMPLITUDE_SUFFIXES = ("ir", "amplitude")

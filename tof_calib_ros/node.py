@@ -37,18 +37,18 @@ from std_srvs.srv import Trigger
 
 from . import Board, CalibrationError, CalibrationResult
 from .bag_io import BagError, BagFrame, BagSource
-from .board_picture import draw
 from .calibration_file import EncodedViews, encode_views, monocular_fields
 from .calibration_worker import CalibrationWorker
-from .collector import Outcome, ViewCollector
+from .collect.board_picture import draw
+from .collect.collector import Outcome, ViewCollector
+from .collect.replay import Replay, Summary
+from .collect.stamp_sync import StampSync
+from .collect.tracking import BoardTracker
 from .image_decode import ImageError, decode_image, depth_to_metres
 from .image_folder import is_image_folder, scan
 from .output_folder import write_calibration
-from .replay import Replay, Summary
 from .ros_run import Executor, run
 from .settings import SETTINGS, Setting, calibration_options, collector_config, refusal
-from .stamp_sync import StampSync
-from .tracking import BoardTracker
 
 COMMIT_TIMEOUT_S = 5.0
 # how a user of the node names the bag's topics, for the errors of bag_io.choose_topics

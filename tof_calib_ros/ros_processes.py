@@ -239,7 +239,7 @@ def play(node: Any, namespace: str, bag: Path, rate: float, procs: tuple[NodePro
     from sensor_msgs.msg import Image
 
     from .bag_io import BagSource
-    from .replay import Skip
+    from .collect.replay import Skip
 
     pubs = [node.create_publisher(Image, f"{namespace}/{topic}", qos_profile_sensor_data)
             for topic in ("amplitude", "depth")]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .calibration_file import CAMERA_NAME
-from .collector import CollectorConfig
+from .collect.collector import CollectorConfig
 from .core.board import MAX_CORNERS_PER_SIDE, MAX_SQUARE_M, MIN_CORNERS_PER_SIDE, MIN_SQUARE_M
 from .core.camera import DEPTH_CONVENTIONS
 from .core.errors import CalibrationError

@@ -308,7 +308,7 @@ def test_board_image_shows_the_detected_corners(launch, spinner):
     from rclpy.qos import qos_profile_sensor_data
 
     from tof_calib_ros import Board
-    from tof_calib_ros.board_picture import KEPT, PANEL_WIDTH, REFUSED, TEXT_BAND_PX, enlarged, scale_for
+    from tof_calib_ros.collect.board_picture import KEPT, PANEL_WIDTH, REFUSED, TEXT_BAND_PX, enlarged, scale_for
     from tof_calib_ros.core.detection import detect
     from tof_calib_ros.image_decode import decode_image
     from tof_calib_ros.node import PICTURE_HZ

@@ -28,10 +28,10 @@ import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..core.board import Board
+from ..core.detection import Detection
+from ..core.errors import CalibrationError
 from .collector import CollectorConfig, Outcome, ViewCollector
-from .core.board import Board
-from .core.detection import Detection
-from .core.errors import CalibrationError
 from .tracking import BoardTracker, accurate_detect, quick_locate
 
 # kind -> what it means, for the summary

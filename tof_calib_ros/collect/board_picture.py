@@ -13,8 +13,8 @@ import math
 import cv2
 import numpy as np
 
+from ..core.detection import tone_map
 from .collector import AXES, Outcome
-from .core.detection import tone_map
 
 MIN_HEIGHT = 400        # px: a 200x200 sensor's frame is enlarged twice
 PANEL_WIDTH = 220       # px of bars beside the image

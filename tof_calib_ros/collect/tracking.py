@@ -11,9 +11,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .core.board import Board
-from .core.detection import UPSCALE_BELOW, Detection, detect, locate, tone_map
-from .core.errors import CalibrationError
+from ..core.board import Board
+from ..core.detection import UPSCALE_BELOW, Detection, detect, locate, tone_map
+from ..core.errors import CalibrationError
 
 # quick_locate(near=...): a corner followed from the previous frame may move this many squares
 # and lie this many squares off the grid; the light squares must be this many grey levels (of 255)
