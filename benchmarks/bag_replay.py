@@ -44,8 +44,8 @@ def measure(bag: Path, workers: int) -> dict:
     import psutil
 
     from tof_calib_ros import Board
-    from tof_calib_ros.bag_io import BagSource
     from tof_calib_ros.collect.replay import Replay
+    from tof_calib_ros.files.bag_io import BagSource
     from tof_calib_ros.ros_processes import tree_memory_mb
     from tof_calib_ros.settings import collector_config, defaults
 

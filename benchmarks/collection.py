@@ -39,9 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from tof_calib_ros import Board, calibrate
-from tof_calib_ros.bag_io import BagSource
 from tof_calib_ros.collect.collector import CollectorConfig
 from tof_calib_ros.collect.replay import Replay, default_workers
+from tof_calib_ros.files.bag_io import BagSource
 from tof_calib_ros.settings import SETTINGS, collector_config, defaults
 from tof_calib_ros.sim_recording import Scene, truth_path, write_recording
 

@@ -54,11 +54,11 @@ from pathlib import Path
 import numpy as np
 
 from tof_calib_ros import Board, View, calibrate, sim
-from tof_calib_ros.calibration_file import load_views
 from tof_calib_ros.collect.collector import CollectorConfig, ViewCollector
 from tof_calib_ros.collect.tracking import BoardTracker, quick_locate
-from tof_calib_ros.image_decode import decode_image, depth_to_metres
-from tof_calib_ros.output_folder import write_calibration
+from tof_calib_ros.files.calibration_file import load_views
+from tof_calib_ros.files.image_decode import decode_image, depth_to_metres
+from tof_calib_ros.files.output_folder import write_calibration
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BOARD = Board(5, 7, 0.03)

@@ -88,7 +88,7 @@ def _digest(out: Path) -> str:
 
 
 def _files_whole(out: Path) -> bool:
-    from tof_calib_ros.calibration_file import CalibrationFileError, load_views, read_camera_yaml
+    from tof_calib_ros.files.calibration_file import CalibrationFileError, load_views, read_camera_yaml
 
     try:
         K = read_camera_yaml(out / "calibration.yaml").K
@@ -246,9 +246,9 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
 
 def fuzz(n: int, seed: int = 0) -> dict:
     """Random inputs per kind; outcome counts: worked, our clear error, anything else (a bug)."""
-    from tof_calib_ros.calibration_file import read_camera_yaml
     from tof_calib_ros.core.errors import CalibrationError
-    from tof_calib_ros.image_decode import decode_image
+    from tof_calib_ros.files.calibration_file import read_camera_yaml
+    from tof_calib_ros.files.image_decode import decode_image
 
     rng = np.random.default_rng(seed)
     encodings = ["mono8", "mono16", "16UC1", "32FC1", "rgb8", "bgr8", "8UC3", "", "garbage"]
@@ -313,7 +313,7 @@ import os, signal, sys
 import numpy as np
 from tof_calib_ros import View
 from tof_calib_ros.core.result import CalibrationResult, ViewReport
-from tof_calib_ros.output_folder import write_calibration
+from tof_calib_ros.files.output_folder import write_calibration
 out, scale, n, kill_at, repeat = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
 calls = [0]
 def killing(real):
@@ -338,7 +338,7 @@ for _ in range(repeat):
 
 def _set_seen(out: Path) -> tuple[float, int] | None:
     """fx and view count of the set a reader sees, or None when its files do not belong together."""
-    from tof_calib_ros.calibration_file import read_camera_yaml
+    from tof_calib_ros.files.calibration_file import read_camera_yaml
 
     gen = Path(os.path.realpath(out / "current"))
     try:
@@ -382,8 +382,8 @@ def faults(log=print) -> dict:
     many ended in a one-line refusal or worked, tracebacks, and data lost (a reader seeing a mixed
     or damaged calibration set, a good set changed by a failed run, a frame lost that was readable)."""
     from tof_calib_ros import Board, sim
-    from tof_calib_ros.calibration_file import save_views
     from tof_calib_ros.core.pipeline import View
+    from tof_calib_ros.files.calibration_file import save_views
 
     rows: dict[str, dict] = {}
     work = Path(tempfile.mkdtemp(prefix="tof_calib_faults_"))
@@ -497,7 +497,7 @@ def faults(log=print) -> dict:
 
 
 def _cut_recording(work: Path, storage: str, suffix: str, views: list, board: list[str], row) -> None:
-    from tof_calib_ros.bag_io import BagWriter
+    from tof_calib_ros.files.bag_io import BagWriter
 
     bag = work / f"rec_{storage}"
     with BagWriter(bag, storage) as w:

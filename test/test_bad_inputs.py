@@ -13,8 +13,8 @@ from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
 from tof_calib_ros.cli import EXIT_OK, main
 from tof_calib_ros.collect.replay import FrameError
 from tof_calib_ros.core.pipeline import MAX_DEPTH_M, depth_in_metres
-from tof_calib_ros.image_decode import MAX_PIXELS, ImageTooLarge, decode_image
-from tof_calib_ros.image_folder import scan
+from tof_calib_ros.files.image_decode import MAX_PIXELS, ImageTooLarge, decode_image
+from tof_calib_ros.files.image_folder import scan
 
 BOARD = Board(5, 7, 0.03)
 
@@ -138,7 +138,7 @@ def test_check_refuses_a_calibration_it_would_misread(tmp_path: Path, capsys, ol
 
 
 def test_a_yaml_alias_bomb_is_refused_before_it_expands(tmp_path: Path) -> None:
-    from tof_calib_ros.calibration_file import CalibrationFileError, read_camera_yaml
+    from tof_calib_ros.files.calibration_file import CalibrationFileError, read_camera_yaml
 
     lines = ["a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]"]
     lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]" for i in range(1, 9)]

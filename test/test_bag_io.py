@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tof_calib_ros.bag_io import (
+from tof_calib_ros.collect.replay import FrameError, Skip
+from tof_calib_ros.files.bag_io import (
     CAMERA_INFO,
     IMAGE,
     STORAGES,
@@ -18,7 +19,6 @@ from tof_calib_ros.bag_io import (
     TopicError,
     choose_topics,
 )
-from tof_calib_ros.collect.replay import FrameError, Skip
 
 AMP, DEPTH, INFO = "/tof/amplitude/image_raw", "/tof/depth/image_raw", "/tof/camera_info"
 K = np.array([[280.0, 0, 99.5], [0, 281.0, 100.5], [0, 0, 1]])

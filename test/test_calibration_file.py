@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import View
-from tof_calib_ros import calibration_file as cf
-from tof_calib_ros.calibration_file import (
+from tof_calib_ros.core.result import CalibrationResult, ViewReport
+from tof_calib_ros.files import calibration_file as cf
+from tof_calib_ros.files.calibration_file import (
     CalibrationFileError,
     encode_views,
     load_views,
@@ -23,8 +24,7 @@ from tof_calib_ros.calibration_file import (
     write_camera_yaml,
     write_json,
 )
-from tof_calib_ros.core.result import CalibrationResult, ViewReport
-from tof_calib_ros.output_folder import write_calibration
+from tof_calib_ros.files.output_folder import write_calibration
 
 K = np.array([[500.0, 0.0, 320.25], [0.0, 501.5, 240.125], [0.0, 0.0, 1.0]])
 D = np.array([0.1, -0.25, 0.001, -0.002, 0.0])
@@ -220,7 +220,7 @@ def test_sigkill_before_the_rename_keeps_the_old_file(tmp_path: Path) -> None:
     child = textwrap.dedent(f"""
         import os, signal
         import numpy as np
-        from tof_calib_ros import calibration_file as cf
+        from tof_calib_ros.files import calibration_file as cf
         os.replace = lambda src, dst: os.kill(os.getpid(), signal.SIGKILL)   # die with the new data on disk
         cf.write_camera_yaml({str(path)!r}, {{"K": np.eye(3), "D": np.zeros(5), "image_size": (1, 1)}}, "x")
     """)
@@ -350,7 +350,7 @@ def test_views_encoded_ahead_are_written_as_the_views_themselves(tmp_path: Path)
 
 
 def test_saved_corners_round_trip_exactly_and_a_bad_file_is_named(tmp_path):
-    from tof_calib_ros.calibration_file import read_corners, save_views
+    from tof_calib_ros.files.calibration_file import read_corners, save_views
 
     rng = np.random.default_rng(3)
     corners = rng.uniform(0, 200, (35, 2))

@@ -16,8 +16,6 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, sim
-from tof_calib_ros.bag_io import IMAGE, BagWriter
-from tof_calib_ros.calibration_file import read_camera_yaml, save_views, write_camera_yaml
 from tof_calib_ros.cli import (
     EXIT_CODES,
     EXIT_ERROR,
@@ -31,6 +29,8 @@ from tof_calib_ros.cli import (
     Progress,
     main,
 )
+from tof_calib_ros.files.bag_io import IMAGE, BagWriter
+from tof_calib_ros.files.calibration_file import read_camera_yaml, save_views, write_camera_yaml
 from tof_calib_ros.settings import SETTINGS
 from tof_calib_ros.sim_recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
 
@@ -198,7 +198,7 @@ def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path
     """A folder of stills is not thinned as a stream is: every view with a whole board is used;
     the views/ written beside the calibration hold their corners, and calibrate again to the same K."""
     from tof_calib_ros import calibrate
-    from tof_calib_ros.calibration_file import load_views
+    from tof_calib_ros.files.calibration_file import load_views
 
     code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "a")
     assert code == EXIT_OK, err

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros.core.errors import CalibrationError
-from tof_calib_ros.image_decode import ENCODINGS, ImageError, decode_image, depth_to_metres
+from tof_calib_ros.files.image_decode import ENCODINGS, ImageError, decode_image, depth_to_metres
 
 try:
     from sensor_msgs.msg import Image

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from tof_calib_ros.calibration_file import (
+from tof_calib_ros.files.calibration_file import (
     CalibrationFileError,
     read_camera_yaml,
     save_views,
     write_camera_yaml,
     write_json,
 )
-from tof_calib_ros.output_folder import GENERATIONS, write_calibration
+from tof_calib_ros.files.output_folder import GENERATIONS, write_calibration
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_calibration_file import K, _result, _views  # noqa: E402

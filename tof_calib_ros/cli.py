@@ -24,13 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from . import Board, CalibrationError, calibrate
-from .bag_io import STORAGES, BagError, BagSource, TopicError
-from .calibration_file import CalibrationFileError, write_json
 from .check import check_views, load_calibration
 from .collect.collector import AXES, ViewCollector
 from .collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
-from .image_folder import is_image_folder, scan
-from .output_folder import write_calibration
+from .files.bag_io import STORAGES, BagError, BagSource, TopicError
+from .files.calibration_file import CalibrationFileError, write_json
+from .files.image_folder import is_image_folder, scan
+from .files.output_folder import write_calibration
 from .settings import SETTINGS, calibration_options, collector_config, defaults, refusal
 from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import sim
-from .calibration_file import read_camera_yaml
+from .files.calibration_file import read_camera_yaml
 from .ros_processes import (
     NodeProcess,
     RosProcessError,

@@ -11,12 +11,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .calibration_file import CAMERA_NAME
 from .collect.collector import CollectorConfig
 from .core.board import MAX_CORNERS_PER_SIDE, MAX_SQUARE_M, MIN_CORNERS_PER_SIDE, MIN_SQUARE_M
 from .core.camera import DEPTH_CONVENTIONS
 from .core.errors import CalibrationError
 from .core.options import DISTORTION_TERMS, PLANE_SQUARES, CalibrationOptions
+from .files.calibration_file import CAMERA_NAME
 
 LOSSES = ("none", "huber", "cauchy")
 

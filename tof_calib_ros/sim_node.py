@@ -16,7 +16,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 
 from . import Board, CalibrationError, sim
-from .calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
+from .files.calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
 from .ros_run import run
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}

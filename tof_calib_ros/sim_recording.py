@@ -25,10 +25,10 @@ import cv2
 import numpy as np
 
 from . import sim
-from .bag_io import BagWriter
 from .core.board import Board
 from .core.camera import project, transform
 from .core.errors import CalibrationError
+from .files.bag_io import BagWriter
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 CAMERA_INFO_MODES = ("factory", "true", "none")

@@ -22,7 +22,7 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from tof_calib_ros import sim  # noqa: E402
-from tof_calib_ros.calibration_file import read_camera_yaml  # noqa: E402
+from tof_calib_ros.files.calibration_file import read_camera_yaml  # noqa: E402
 
 CALIBRATE_TIMEOUT_S = 90.0
 
@@ -310,7 +310,7 @@ def test_board_image_shows_the_detected_corners(launch, spinner):
     from tof_calib_ros import Board
     from tof_calib_ros.collect.board_picture import KEPT, PANEL_WIDTH, REFUSED, TEXT_BAND_PX, enlarged, scale_for
     from tof_calib_ros.core.detection import detect
-    from tof_calib_ros.image_decode import decode_image
+    from tof_calib_ros.files.image_decode import decode_image
     from tof_calib_ros.node import PICTURE_HZ
 
     ns = "/pic"

@@ -29,7 +29,7 @@ from ros_helpers import RESEND_S, START_TIMEOUT_S, Spinner, answered, logs, set_
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from tof_calib_ros.calibration_file import load_views, read_camera_yaml  # noqa: E402
+from tof_calib_ros.files.calibration_file import load_views, read_camera_yaml  # noqa: E402
 
 COLLECT_TIMEOUT_S = 90.0
 BOARD = ("-p", "board.cols:=5", "-p", "board.rows:=7", "-p", "board.square:=0.03")

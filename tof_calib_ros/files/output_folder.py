@@ -32,6 +32,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from ..core.pipeline import View
 from .calibration_file import (
     CalibrationFileError,
     EncodedViews,
@@ -42,7 +43,6 @@ from .calibration_file import (
     sync_dir,
     write_json,
 )
-from .core.pipeline import View
 
 GENERATIONS = ".generations"
 CURRENT = "current"

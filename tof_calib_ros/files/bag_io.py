@@ -25,11 +25,11 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
+from ..collect.replay import FrameError, Skip
+from ..collect.stamp_sync import StampSync
+from ..core.errors import CalibrationError
 from .bag_salvage import McapSalvage, SqliteSalvage, storage_files
 from .calibration_file import monocular_fields
-from .collect.replay import FrameError, Skip
-from .collect.stamp_sync import StampSync
-from .core.errors import CalibrationError
 from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
 
 IMAGE = "sensor_msgs/msg/Image"

@@ -17,9 +17,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..collect.replay import FrameError, Skip
+from ..core.pipeline import depth_in_metres
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
-from .collect.replay import FrameError, Skip
-from .core.pipeline import depth_in_metres
 from .image_decode import ImageTooLarge, check_pixels
 
 EXTENSIONS = (".png", ".tif", ".tiff", ".npy")

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from .core.errors import CalibrationError
-from .core.pipeline import depth_in_metres
+from ..core.errors import CalibrationError
+from ..core.pipeline import depth_in_metres
 
 # encoding -> pixel type (one channel each); only what depth and amplitude streams use
 ENCODINGS: dict[str, np.dtype] = {
