@@ -1,7 +1,7 @@
 """Bag replay speed and memory: frame pairs per second through the view collector, with one and
 two worker processes, and the resident memory of a short and a long recording.
 
-The recordings are simulated (``sim_recording``: the board held still at a pose for 8 frames,
+The recordings are simulated (``sim.recording``: the board held still at a pose for 8 frames,
 moved to the next over 8) at 200x200 (PMD class) and 640x576 (Azure Kinect class); a cycle of
 rendered frames is repeated to make long bags, with fresh stamps. Each measurement runs in its
 own process: the bag is opened, every frame decoded, its board found and judged by the
@@ -31,7 +31,7 @@ SHORT, LONG = 1000, 10000
 
 
 def make_bag(path: Path, camera: str, frames: int) -> None:
-    from tof_calib_ros.sim_recording import Scene, render_frames, write_recording
+    from tof_calib_ros.sim.recording import Scene, render_frames, write_recording
 
     scene = Scene(camera=camera, frames=CYCLE_POSES[camera] * 16, hold=8, transit=8, seed=5)
     cycle = list(render_frames(scene))

@@ -43,7 +43,7 @@ from tof_calib_ros.collect.collector import CollectorConfig
 from tof_calib_ros.collect.replay import Replay, default_workers
 from tof_calib_ros.files.bag_io import BagSource
 from tof_calib_ros.settings import SETTINGS, collector_config, defaults
-from tof_calib_ros.sim_recording import Scene, truth_path, write_recording
+from tof_calib_ros.sim.recording import Scene, truth_path, write_recording
 
 BOARD = Board(5, 7, 0.03)
 VIEWS_MAX = SETTINGS["views.max"].default

@@ -32,7 +32,7 @@ from tof_calib_ros.cli import (
 from tof_calib_ros.files.bag_io import IMAGE, BagWriter
 from tof_calib_ros.files.calibration_file import read_camera_yaml, save_views, write_camera_yaml
 from tof_calib_ros.settings import SETTINGS
-from tof_calib_ros.sim_recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
+from tof_calib_ros.sim.recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
 
 VIEWS_MAX, MAX_BLUR_PX = SETTINGS["views.max"].default, SETTINGS["motion.max_blur_px"].default
 

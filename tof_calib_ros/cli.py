@@ -32,7 +32,7 @@ from .files.calibration_file import CalibrationFileError, write_json
 from .files.image_folder import is_image_folder, scan
 from .files.output_folder import write_calibration
 from .settings import SETTINGS, calibration_options, collector_config, defaults, refusal
-from .sim_recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
+from .sim.recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 
 REJECTED_DIR = "rejected"  # a refused calibration's report and figures, inside --output
 EXIT_OK = 0

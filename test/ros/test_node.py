@@ -250,7 +250,7 @@ def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
 def test_bag_parameter_replays_a_recording_then_calibrates_and_publishes(launch, spinner, tmp_path):
     """`-p bag.path:=BAG`: views from a recording instead of the topics, then the usual
     calibration, CameraInfo and files, to the recording's ground truth."""
-    from tof_calib_ros.sim_recording import FRAME_ID, Scene, truth_path, write_recording
+    from tof_calib_ros.sim.recording import FRAME_ID, Scene, truth_path, write_recording
 
     bag, out = tmp_path / "recording", tmp_path / "out"
     write_recording(bag, Scene(frames=240, hold=5, transit=5, seed=1), "mcap")
@@ -282,7 +282,7 @@ def test_a_board_that_never_stops_is_calibrated_live(launch, spinner, tmp_path):
     played to the node's topics at its own rate (10 frames/s), as a camera would: the views it
     keeps calibrate to the truth."""
     from tof_calib_ros.ros_processes import play
-    from tof_calib_ros.sim_recording import Scene, truth_path, write_recording
+    from tof_calib_ros.sim.recording import Scene, truth_path, write_recording
 
     bag, out = tmp_path / "moving", tmp_path / "out"
     write_recording(bag, Scene(motion="continuous", rate=10.0, frames=200, lead_in=10, segment=1.5, seed=3,

@@ -24,11 +24,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import sim
-from .core.board import Board
-from .core.camera import project, transform
-from .core.errors import CalibrationError
-from .files.bag_io import BagWriter
+from .. import sim
+from ..core.board import Board
+from ..core.camera import project, transform
+from ..core.errors import CalibrationError
+from ..files.bag_io import BagWriter
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 CAMERA_INFO_MODES = ("factory", "true", "none")

@@ -8,7 +8,10 @@ traced back along its viewing ray to the board plane, so the geometry is that of
 
 Pixel ``(u, v)`` is centred on image coordinate ``(u, v)``, as in OpenCV, so the corners that
 ``cv2.findChessboardCornersSB`` returns are directly comparable with ``Frame.corners``.
-No ROS here: numpy and OpenCV only.
+
+The simulator package: this renderer (numpy and OpenCV, importing ``core`` only) and
+``sim.recording``, which films scenes into bags for the offline tool (importing ``files`` for
+the bag writer). The ROS driver that streams it is ``ros.sim_node``; nothing here imports rclpy.
 """
 from __future__ import annotations
 
@@ -18,9 +21,9 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from .core import camera as cam
-from .core.board import Board
-from .core.errors import CalibrationError
+from ..core import camera as cam
+from ..core.board import Board
+from ..core.errors import CalibrationError
 
 RngLike = np.random.Generator | int | None
 
