@@ -34,6 +34,6 @@ setup(
     entry_points={"console_scripts": [
         "calibration_node = tof_calib_ros.node:main",
         "tof_sim_node = tof_calib_ros.sim_node:main",
-        "tof_calib = tof_calib_ros.cli:main",
+        "tof_calib = tof_calib_ros.offline.cli:main",
     ]},
 )

@@ -372,7 +372,7 @@ def _cli(*argv: str, timeout: float = 600.0) -> tuple[int, str, float]:
     import sys
 
     t0 = time.monotonic()
-    proc = subprocess.run([sys.executable, "-m", "tof_calib_ros.cli", *map(str, argv)], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "tof_calib_ros.offline.cli", *map(str, argv)], capture_output=True,
                           text=True, timeout=timeout)
     return proc.returncode, proc.stdout + proc.stderr, time.monotonic() - t0
 

@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, sim
-from tof_calib_ros.cli import (
+from tof_calib_ros.files.bag_io import IMAGE, BagWriter
+from tof_calib_ros.files.calibration_file import read_camera_yaml, save_views, write_camera_yaml
+from tof_calib_ros.offline.cli import (
     EXIT_CODES,
     EXIT_ERROR,
     EXIT_MISSING_TOPIC,
@@ -29,8 +31,6 @@ from tof_calib_ros.cli import (
     Progress,
     main,
 )
-from tof_calib_ros.files.bag_io import IMAGE, BagWriter
-from tof_calib_ros.files.calibration_file import read_camera_yaml, save_views, write_camera_yaml
 from tof_calib_ros.settings import SETTINGS
 from tof_calib_ros.sim.recording import FRAME_ID, TOPICS, Scene, render_frames, truth_path
 
@@ -452,7 +452,7 @@ def test_progress_is_a_bar_on_a_terminal_and_plain_lines_otherwise():
 
 
 def test_the_module_runs_and_the_ros2_run_launcher_finds_the_console_script(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "tof_calib_ros.cli", "--help"], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-m", "tof_calib_ros.offline.cli", "--help"], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0 and "exit codes:" in done.stdout
     # a wheel's layout: <prefix>/lib/tof_calib_ros/tof_calib runs <prefix>/bin/tof_calib with the arguments

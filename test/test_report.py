@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
-from tof_calib_ros.report import ReportError, write_report
+from tof_calib_ros.offline.report import ReportError, write_report
 
 BOARD = Board(8, 6, 0.04)
 CAM = sim.pmd_camera()

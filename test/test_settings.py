@@ -5,7 +5,7 @@ import argparse
 
 import pytest
 
-from tof_calib_ros import cli
+from tof_calib_ros.offline import cli
 from tof_calib_ros.settings import SETTINGS, calibration_options, collector_config, defaults, refusal
 
 

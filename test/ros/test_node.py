@@ -374,7 +374,7 @@ def test_a_node_with_the_kinect_options_calibrates_the_kinect_views_as_tof_calib
     """One home for the settings: -p depth.bias:=offset+tilt reaches the node's calibration as
     --depth-bias offset+tilt reaches tof_calib's, and bag.path takes a folder of stills as
     `tof_calib images` does: the same views, the same result."""
-    from tof_calib_ros.cli import main
+    from tof_calib_ros.offline.cli import main
 
     assert main(["images", str(kinect_dir), "--size", "5x7", "--square", "0.03", "--depth-bias", "offset+tilt",
                  "--output", str(tmp_path / "cli")]) == 0, capsys.readouterr().err

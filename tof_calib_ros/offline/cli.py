@@ -23,16 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
-from . import Board, CalibrationError, calibrate
+from .. import Board, CalibrationError, calibrate
+from ..collect.collector import AXES, ViewCollector
+from ..collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
+from ..files.bag_io import STORAGES, BagError, BagSource, TopicError
+from ..files.calibration_file import CalibrationFileError, write_json
+from ..files.image_folder import is_image_folder, scan
+from ..files.output_folder import write_calibration
+from ..settings import SETTINGS, calibration_options, collector_config, defaults, refusal
+from ..sim.recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 from .check import check_views, load_calibration
-from .collect.collector import AXES, ViewCollector
-from .collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
-from .files.bag_io import STORAGES, BagError, BagSource, TopicError
-from .files.calibration_file import CalibrationFileError, write_json
-from .files.image_folder import is_image_folder, scan
-from .files.output_folder import write_calibration
-from .settings import SETTINGS, calibration_options, collector_config, defaults, refusal
-from .sim.recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 
 REJECTED_DIR = "rejected"  # a refused calibration's report and figures, inside --output
 EXIT_OK = 0

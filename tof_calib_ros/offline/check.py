@@ -19,14 +19,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .core import depth_bias as bias_model
-from .core.board import Board
-from .core.camera import depth_of, pack_intrinsics, transform
-from .core.errors import CalibrationError
-from .core.pipeline import View
-from .core.planarize import planarize
-from .core.result import MAX_DEPTH_RMS, MAX_FOCAL_REL_STD, MAX_PIXEL_RMS
-from .files.calibration_file import CalibrationFileError, CameraYaml, read_camera_yaml
+from ..core import depth_bias as bias_model
+from ..core.board import Board
+from ..core.camera import depth_of, pack_intrinsics, transform
+from ..core.errors import CalibrationError
+from ..core.pipeline import View
+from ..core.planarize import planarize
+from ..core.result import MAX_DEPTH_RMS, MAX_FOCAL_REL_STD, MAX_PIXEL_RMS
+from ..files.calibration_file import CalibrationFileError, CameraYaml, read_camera_yaml
 
 # Depth residuals growing by more than this fraction of the distance fail the check: the focal
 # length would be off by as much (the calibration's own limit on its focal length's uncertainty).

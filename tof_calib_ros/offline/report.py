@@ -29,14 +29,14 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from .core import depth_bias as bias_model
-from .core.board import Board
-from .core.camera import depth_of, pack_intrinsics, project, transform
-from .core.errors import CalibrationError
-from .core.pipeline import View, calibrate, depth_in_metres
-from .core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
-from .core.result import INTRINSIC_NAMES, CalibrationResult
-from .files.calibration_file import atomic_write
+from ..core import depth_bias as bias_model
+from ..core.board import Board
+from ..core.camera import depth_of, pack_intrinsics, project, transform
+from ..core.errors import CalibrationError
+from ..core.pipeline import View, calibrate, depth_in_metres
+from ..core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
+from ..core.result import INTRINSIC_NAMES, CalibrationResult
+from ..files.calibration_file import atomic_write
 
 MIN_CV_VIEWS = 6            # three a half: the fewest a calibration accepts
 CONSISTENT_SIGMAS = 3.0     # a half-sample difference within this many predicted sigmas is consistent
