@@ -32,8 +32,8 @@ setup(
     description="Depth-aided intrinsic calibration of time-of-flight cameras.",
     license="Apache-2.0",
     entry_points={"console_scripts": [
-        "calibration_node = tof_calib_ros.node:main",
-        "tof_sim_node = tof_calib_ros.sim_node:main",
+        "calibration_node = tof_calib_ros.ros.node:main",
+        "tof_sim_node = tof_calib_ros.ros.sim_node:main",
         "tof_calib = tof_calib_ros.offline.cli:main",
     ]},
 )

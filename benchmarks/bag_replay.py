@@ -46,7 +46,7 @@ def measure(bag: Path, workers: int) -> dict:
     from tof_calib_ros import Board
     from tof_calib_ros.collect.replay import Replay
     from tof_calib_ros.files.bag_io import BagSource
-    from tof_calib_ros.ros_processes import tree_memory_mb
+    from tof_calib_ros.ros.processes import tree_memory_mb
     from tof_calib_ros.settings import collector_config, defaults
 
     me = psutil.Process()

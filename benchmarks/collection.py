@@ -109,7 +109,7 @@ def live(bag: Path, rate: float, workdir: Path, spinner, env: dict, ns: str) -> 
     """A calibration_node fed the recording at its rate; ~/calibrate; its calibration.json."""
     from std_srvs.srv import Trigger
 
-    from tof_calib_ros.ros_processes import NodeProcess, play
+    from tof_calib_ros.ros.processes import NodeProcess, play
 
     out = workdir / ns.strip("/")
     proc = NodeProcess("calibration_node", ["-r", f"__ns:={ns}", "-p", f"output_dir:={out}"], workdir, env)
@@ -132,7 +132,7 @@ def run(seeds: list[int], seconds: float, with_live: bool, cameras: tuple[str, .
         # as the README's "Large images" says: Fast DDS tuned for 640x576 frames (node_throughput's)
         from node_throughput import use_tuned_fast_dds
 
-        from tof_calib_ros.ros_processes import Spinner, ros_environment
+        from tof_calib_ros.ros.processes import Spinner, ros_environment
 
         use_tuned_fast_dds(Path(tempfile.mkdtemp(prefix="tof_collection_dds_")))
         env = ros_environment()

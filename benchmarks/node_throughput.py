@@ -275,7 +275,7 @@ class NodeUnderTest:
         from diagnostic_msgs.msg import DiagnosticArray
         from std_srvs.srv import Trigger
 
-        from tof_calib_ros.ros_processes import NodeProcess, RosProcessError, logs, tree_memory_mb, wait_until
+        from tof_calib_ros.ros.processes import NodeProcess, RosProcessError, logs, tree_memory_mb, wait_until
 
         self.ns, self.spinner, self.out = ns, spinner, workdir / ns.strip("/") / "out"
         self.proc = NodeProcess("calibration_node", ["-r", f"__ns:={ns}", *BOARD_ARGS, "-p", f"output_dir:={self.out}",
@@ -487,7 +487,7 @@ def memory(node: NodeUnderTest, rate: float, checkpoints: tuple[int, ...], log) 
 def run(quick: bool, default_transport: bool = False, log=print) -> dict:
     import rclpy
 
-    from tof_calib_ros.ros_processes import Spinner, ros_environment
+    from tof_calib_ros.ros.processes import Spinner, ros_environment
 
     seconds, runs = (6.0, 1) if quick else (20.0, 3)
     repeats = 2 if quick else 5

@@ -105,8 +105,8 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     from sensor_msgs.msg import CameraInfo, Image
     from std_srvs.srv import Trigger
 
-    from tof_calib_ros.ros_processes import NodeProcess, Spinner, ros_environment, tree_memory_mb, wait_until
-    from tof_calib_ros.ros_processes import answered as is_answered
+    from tof_calib_ros.ros.processes import NodeProcess, Spinner, ros_environment, tree_memory_mb, wait_until
+    from tof_calib_ros.ros.processes import answered as is_answered
 
     rnd = random.Random(seed)
     env = ros_environment()

@@ -30,7 +30,7 @@ def test_every_setting_with_a_flag_is_an_option_with_the_same_default(command):
 
 def test_the_node_declares_every_setting_with_its_range():
     pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed")
-    from tof_calib_ros.node import PARAMETERS
+    from tof_calib_ros.ros.node import PARAMETERS
 
     assert list(PARAMETERS) == list(SETTINGS)
     for name, (default, descriptor) in PARAMETERS.items():

@@ -1,4 +1,4 @@
-"""The package's process helpers (tof_calib_ros.ros_processes) as pytest wants them: a package
+"""The package's process helpers (tof_calib_ros.ros.processes) as pytest wants them: a package
 missing from the ament index skips the node tests, a wait that runs out fails the test."""
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from tof_calib_ros.ros_processes import (  # noqa: E402, F401
+from tof_calib_ros.ros.processes import (  # noqa: E402, F401
     NodeProcess,
     NotInstalled,
     RosProcessError,
@@ -24,8 +24,8 @@ from tof_calib_ros.ros_processes import (  # noqa: E402, F401
     logs,
     ros_environment,
 )
-from tof_calib_ros.ros_processes import executable as _executable  # noqa: E402
-from tof_calib_ros.ros_processes import wait_until as _wait_until  # noqa: E402
+from tof_calib_ros.ros.processes import executable as _executable  # noqa: E402
+from tof_calib_ros.ros.processes import wait_until as _wait_until  # noqa: E402
 
 START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
 RESEND_S = 5.0   # a repeatable call unanswered this long is sent again (Spinner.call says why)

@@ -235,7 +235,7 @@ def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
 
     env, _ = ros
     env = {k: v for k, v in env.items() if k != "ROS_DOMAIN_ID"}   # the demo picks its own
-    run = subprocess.run([sys.executable, "-m", "tof_calib_ros.demo", "--views", "10", "--output", str(tmp_path)],
+    run = subprocess.run([sys.executable, "-m", "tof_calib_ros.ros.demo", "--views", "10", "--output", str(tmp_path)],
                          capture_output=True, text=True, timeout=300, env=env)
     assert run.returncode == 0, run.stdout + run.stderr
     rows = {line.split()[0]: line.split() for line in run.stdout.splitlines() if line[:2] in ("fx", "fy")}
@@ -281,7 +281,7 @@ def test_a_board_that_never_stops_is_calibrated_live(launch, spinner, tmp_path):
     """A recording of a board waved without a pause, entering after a second without one,
     played to the node's topics at its own rate (10 frames/s), as a camera would: the views it
     keeps calibrate to the truth."""
-    from tof_calib_ros.ros_processes import play
+    from tof_calib_ros.ros.processes import play
     from tof_calib_ros.sim.recording import Scene, truth_path, write_recording
 
     bag, out = tmp_path / "moving", tmp_path / "out"
@@ -311,7 +311,7 @@ def test_board_image_shows_the_detected_corners(launch, spinner):
     from tof_calib_ros.collect.board_picture import KEPT, PANEL_WIDTH, REFUSED, TEXT_BAND_PX, enlarged, scale_for
     from tof_calib_ros.core.detection import detect
     from tof_calib_ros.files.image_decode import decode_image
-    from tof_calib_ros.node import PICTURE_HZ
+    from tof_calib_ros.ros.node import PICTURE_HZ
 
     ns = "/pic"
     camera = launch("tof_sim_node", "-r", f"__ns:={ns}", "-p", "rate:=15.0")

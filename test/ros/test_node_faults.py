@@ -215,7 +215,7 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     from hypothesis import strategies as st
     from rcl_interfaces.srv import GetParameters
 
-    from tof_calib_ros.node import PARAMETERS
+    from tof_calib_ros.ros.node import PARAMETERS
     from tof_calib_ros.settings import CAMERA_NAME
 
     node = launch("calibration_node", "-r", "__ns:=/f4")

@@ -13,8 +13,8 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from ros_helpers import START_TIMEOUT_S, executable, logs, wait_until  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
-from tof_calib_ros.node import PARAMETERS  # noqa: E402
-from tof_calib_ros.sim_node import PARAMETERS as SIM_PARAMETERS  # noqa: E402
+from tof_calib_ros.ros.node import PARAMETERS  # noqa: E402
+from tof_calib_ros.ros.sim_node import PARAMETERS as SIM_PARAMETERS  # noqa: E402
 
 NODES = {"calibration_node": PARAMETERS, "tof_sim_node": SIM_PARAMETERS}
 

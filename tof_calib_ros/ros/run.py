@@ -29,7 +29,7 @@ from rclpy.executors import (
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from .core.errors import CalibrationError
+from ..core.errors import CalibrationError
 
 STOP_TIMEOUT_S = 5.0   # callbacks still running when a signal comes get this long to finish
 

@@ -14,10 +14,10 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from .collect.replay import worker_context
-from .core.errors import CalibrationError
-from .core.pipeline import calibrate
-from .core.result import CalibrationResult
+from ..collect.replay import worker_context
+from ..core.errors import CalibrationError
+from ..core.pipeline import calibrate
+from ..core.result import CalibrationResult
 
 PARENT_CHECK_S = 1.0
 

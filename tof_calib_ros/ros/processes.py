@@ -238,8 +238,8 @@ def play(node: Any, namespace: str, bag: Path, rate: float, procs: tuple[NodePro
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
 
-    from .collect.replay import Skip
-    from .files.bag_io import BagSource
+    from ..collect.replay import Skip
+    from ..files.bag_io import BagSource
 
     pubs = [node.create_publisher(Image, f"{namespace}/{topic}", qos_profile_sensor_data)
             for topic in ("amplitude", "depth")]

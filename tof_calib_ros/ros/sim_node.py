@@ -15,9 +15,9 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 
-from . import Board, CalibrationError, sim
-from .files.calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
-from .ros_run import run
+from .. import Board, CalibrationError, sim
+from ..files.calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
+from .run import run
 
 CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 # name: (default, description); all read-only

@@ -1,6 +1,6 @@
 """The no-hardware demo: the calibration node calibrates the simulated ToF camera over ROS 2.
 
-    python -m tof_calib_ros.demo [--camera pmd|azure] [--views 12] [--output DIR]
+    python -m tof_calib_ros.ros.demo [--camera pmd|azure] [--views 12] [--output DIR]
 
 What a user does at sensor bring-up, scripted: start the camera driver (here ``tof_sim_node``, a
 PMD-class 200x200 camera, or an Azure Kinect NFOV-like 640x576 one, whose factory calibration is
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import sim
-from .files.calibration_file import read_camera_yaml
-from .ros_processes import (
+from .. import sim
+from ..files.calibration_file import read_camera_yaml
+from .processes import (
     NodeProcess,
     RosProcessError,
     Spinner,

@@ -35,20 +35,20 @@ from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_srvs.srv import Trigger
 
-from . import Board, CalibrationError, CalibrationResult
+from .. import Board, CalibrationError, CalibrationResult
+from ..collect.board_picture import draw
+from ..collect.collector import Outcome, ViewCollector
+from ..collect.replay import Replay, Summary
+from ..collect.stamp_sync import StampSync
+from ..collect.tracking import BoardTracker
+from ..files.bag_io import BagError, BagFrame, BagSource
+from ..files.calibration_file import EncodedViews, encode_views, monocular_fields
+from ..files.image_decode import ImageError, decode_image, depth_to_metres
+from ..files.image_folder import is_image_folder, scan
+from ..files.output_folder import write_calibration
+from ..settings import SETTINGS, Setting, calibration_options, collector_config, refusal
 from .calibration_worker import CalibrationWorker
-from .collect.board_picture import draw
-from .collect.collector import Outcome, ViewCollector
-from .collect.replay import Replay, Summary
-from .collect.stamp_sync import StampSync
-from .collect.tracking import BoardTracker
-from .files.bag_io import BagError, BagFrame, BagSource
-from .files.calibration_file import EncodedViews, encode_views, monocular_fields
-from .files.image_decode import ImageError, decode_image, depth_to_metres
-from .files.image_folder import is_image_folder, scan
-from .files.output_folder import write_calibration
-from .ros_run import Executor, run
-from .settings import SETTINGS, Setting, calibration_options, collector_config, refusal
+from .run import Executor, run
 
 COMMIT_TIMEOUT_S = 5.0
 # how a user of the node names the bag's topics, for the errors of bag_io.choose_topics
