@@ -4,6 +4,8 @@ The node declares its ROS parameters from these (``-p views.min:=12``) and ``tof
 its options from them (``--views-min 12``), so the two cannot drift apart: the same defaults,
 the same ranges, the same refusals in the same words. The calibration options (the depth
 model, distortion, loss, plane squares) are here too, so the node offers what the CLI does.
+Shared by both front ends (``offline`` and ``ros``), so it sits below them: it may import
+``core``, ``collect`` and ``files``, and no ROS.
 """
 from __future__ import annotations
 

@@ -1,1 +1,8 @@
-"""The ROS-free calibration engine: numpy, scipy and OpenCV only."""
+"""The calibration engine, read as the paper's algorithm: the board and its detection
+(``board``, ``detection``), the camera model (``camera``), OpenCV's calibration as the first
+guess (``traditional``), the denoised corner depths (``planarize``), K from the squares' true
+size (``depth_init``), the joint fit (``bundle``) with the ToF depth error model
+(``depth_bias``), the options and the model chosen (``options``), the whole method
+(``pipeline``) and its result (``result``). numpy, scipy and OpenCV only: imports nothing of
+ours outside ``core``, so it runs, and can be changed, without ROS, files or streams.
+"""
