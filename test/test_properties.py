@@ -411,18 +411,16 @@ def test_calibrate_options_work_or_raise_calibration_error(views, kwargs):
 
 
 @pytest.mark.parametrize("wrong", [
-    pytest.param({"depth_convention": "radial"}, marks=pytest.mark.xfail(strict=True, reason=(
-        "known defect (issue 12's closing note): z-depth calibrated as radial is trusted 3 % off; full distortion "
-        "and a 4 degree depth tilt absorb most of it, and the corners' check and the verdict (5 sigma, 5 % "
-        "floor) let the rest through")), id="z-depth-as-radial"),
-    pytest.param({"distortion": "none"}, marks=pytest.mark.xfail(strict=True, reason=(
-        "known defect (issue 12's closing note): distortion='none' forced on a lens with k1 = -0.1 is trusted "
-        "1.9 % off; its pixel RMS (0.055 px) is far above the corners-alone fit's but under the verdict's 1 px")),
-        id="no-distortion-on-a-lens"),
+    # z-depth calibrated as radial: trusted 3 % off before the corners-fit check (full distortion and a 4 degree
+    # depth tilt absorbed most of it); distortion 'none' on a lens with k1 = -0.1: trusted 1.9 % off, its pixel
+    # RMS 0.055 px far above the corners-alone fit's but under the verdict's 1 px
+    pytest.param({"depth_convention": "radial"}, id="z-depth-as-radial"),
+    pytest.param({"distortion": "none"}, id="no-distortion-on-a-lens"),
 ])
 def test_a_wrong_model_given_is_not_trusted(views, wrong):
     result = calibrate(views, BOARD, **wrong)
     assert not result.ok or result.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
+    assert any("the corners fit worse with the depth than alone" in r for r in result.verdict), result.verdict
 
 
 @pytest.mark.parametrize("board", [None, (6, 5, 0.04), "6x5"])

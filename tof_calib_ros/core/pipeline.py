@@ -326,13 +326,16 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
-    corner_focal = None
+    corner_focal = corner_noise = None
     if corner_fit is not None:
         std = _std(corner_fit)
         corner_focal = (*map(float, corner_fit.state.intrinsics[:2]), std["fx"], std["fy"])
+        r = np.concatenate([p.ravel() for p in corner_fit.pixel_residuals])
+        dof = r.size - 6 * len(views) - len(corner_fit.free_global)
+        corner_noise = (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan"), int(dof))
     return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
                              _std(fit), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
-                             board.square)
+                             board.square, corner_noise=corner_noise)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,

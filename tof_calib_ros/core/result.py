@@ -4,9 +4,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import f as f_distribution
 
 from .depth_bias import NAMES
-from .options import CalibrationOptions, Model
+from .options import DISTORTION_TERMS, CalibrationOptions, Model
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
@@ -23,6 +24,14 @@ MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
 # downsampled to 205x170 the corners alone are 3.6 % (8 of them) from the depth-aided result,
 # which agrees with the full-resolution one; a square 10 % off moves the depth-aided one 5.6 %.
 MAX_CORNER_DEPTH_DISAGREEMENT = 0.05
+# The corners must fit about as well with the depth as alone. The depth costs them a little on real
+# data (real Kinect v2 subsets of 3-10 views: up to 1.55 times the corners-alone pixel noise, 0.018 px
+# above it); a lens model too small for the lens or a wrong depth convention costs more (0.03-0.05 px
+# on the simulated 200x200 camera). Flagged when all three say so: the F-test at this false-alarm
+# rate, the ratio and the excess.
+CORNER_FIT_P = 1e-3
+MAX_PIXEL_NOISE_RATIO = 1.6
+MIN_PIXEL_EXCESS = 0.02      # px
 
 
 @dataclass
@@ -58,6 +67,7 @@ class CalibrationResult:
     model: Model = field(default_factory=Model)   # as chosen: distortion, depth terms, plane squares, and why
     square: float = float("nan")   # m, the board's square size as given
     depth_square: float = float("nan")   # m, the square size the depth implies with the corners' focal length
+    corner_noise: tuple[float, int] | None = None   # the corners-alone fit's pixel noise (px), its degrees of freedom
 
     @property
     def depth_offset(self) -> float:
@@ -72,6 +82,14 @@ class CalibrationResult:
         d = np.concatenate([v.depth_residuals for v in self.views])
         d = d[np.isfinite(d)]
         return float(np.sqrt(np.mean(d ** 2))) if d.size else float("nan")
+
+    @property
+    def pixel_noise(self) -> tuple[float, int]:
+        """The pixel noise per degree of freedom (px) and those degrees: 6 pose parameters a view
+        and the intrinsics of the lens model taken are not free to fit noise."""
+        r = np.concatenate([v.pixel_residuals.ravel() for v in self.views])
+        dof = r.size - 6 * len(self.views) - 4 - len(DISTORTION_TERMS.get(self.model.distortion, []))
+        return (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan")), int(dof)
 
     @property
     def verdict(self) -> list[str]:
@@ -100,6 +118,13 @@ class CalibrationResult:
                     reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
                                    f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
                                    + self._squares_look(f / c))
+        if self.corner_noise is not None and self.method == "depth":
+            (ours, dof), (alone, dof_alone) = self.pixel_noise, self.corner_noise
+            if dof > 0 and dof_alone > 0 and ours - alone > MIN_PIXEL_EXCESS and ours > MAX_PIXEL_NOISE_RATIO * alone \
+                    and (ours / alone) ** 2 > f_distribution.ppf(1 - CORNER_FIT_P, dof, dof_alone):
+                reasons.append(f"the corners fit worse with the depth than alone ({ours:.3f} against {alone:.3f} px a "
+                               "degree of freedom): the lens model is too small for this lens, or the depth pulls the "
+                               "camera off what the corners say (a depth error the model does not explain)")
         scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
         if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
             reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
@@ -149,6 +174,8 @@ class CalibrationResult:
             "notes": list(self.notes),
             "corner_only_focal": None if self.corner_focal is None else dict(zip(
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.corner_focal))),
+            "corner_only_pixel_noise": None if self.corner_noise is None else dict(zip(
+                ("px", "dof"), self.corner_noise)),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
