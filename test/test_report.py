@@ -175,6 +175,32 @@ def test_traditional_and_cross_validation_match_independent_calibrations(report)
     assert "parameters agree within 3 predicted standard deviations" in page.sections["cross-validation"]
 
 
+def test_the_banner_agrees_with_the_cross_validation(report):
+    views, result, path, _ = report
+    page = _Page(path.read_text("utf-8"))
+    apart = [name for name, row in page.rows("cross-validation").items() if row[7] == "inconsistent"]
+    summary = page.sections["summary"]
+    assert result.ok
+    assert ("Trusted" in summary) == (not apart) and ("cross-validation disagrees" in summary) == bool(apart)
+    assert all(name in summary for name in apart)
+
+
+def test_halves_further_apart_than_their_sigmas_take_the_trust_out_of_the_banner(report):
+    from dataclasses import replace
+
+    from tof_calib_ros.offline.report import _Comparison, _section_summary
+
+    views, result, _, _ = report
+    options = {"distortion": "plumb_bob", "depth_bias": "offset", "plane_squares": "all"}
+    K = result.K.copy()
+    K[0, 0] += 10 * result.std["fx"]   # 10 / sqrt(2) of the difference's predicted sigmas
+    apart = _Comparison(result, (result, replace(result, K=K)), ([0], [1]))
+    summary = _section_summary(result, views, options, apart)
+    assert "Trusted" not in summary and "cross-validation disagrees" in summary and "fx 7.1" in summary
+    agree = _Comparison(result, (result, result), ([0], [1]))
+    assert "Trusted:" in _section_summary(result, views, options, agree)
+
+
 def test_where_opencv_refuses_the_report_says_so(tmp_path):
     cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)
     rng = np.random.default_rng(2)

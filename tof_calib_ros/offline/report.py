@@ -56,6 +56,7 @@ th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f
 td:first-child,th:first-child{text-align:left}
 .ok{background:#e6f4e6;border:1px solid #5a5;padding:.6em 1em}
 .bad{background:#fbe9e9;border:1px solid #c55;padding:.6em 1em}
+.warn{background:#fff4dc;border:1px solid #d9a400;padding:.6em 1em}
 .note{background:#f6f6f6;border-left:4px solid #999;padding:.4em .8em}
 td.fail{color:#b00;font-weight:bold}td.pass{color:#070}
 figure{margin:1em 0}figure img{max-width:100%}figcaption{font-size:.9em;color:#444}
@@ -112,7 +113,7 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
     comparison = _compare(views, data, board, result, options)
     say("report: drawing the figures")
     sections = [
-        ("summary", "Verdict and summary", _section_summary(result, views, options)),
+        ("summary", "Verdict and summary", _section_summary(result, views, options, comparison)),
         ("parameters", "Parameters", _section_parameters(result)),
         ("residuals", "Residuals", _section_residuals(data, result)),
         ("per-view", "Per view", _section_per_view(data, result)),
@@ -190,6 +191,22 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
     return _Comparison(other, halves, half_views)
 
 
+def _half_ratios(result: CalibrationResult, comparison: _Comparison) -> list[tuple[str, float, float, float]] | None:
+    """Per estimated parameter: the halves' difference, its predicted standard deviation and their
+    ratio (in the shown units); None when there is no cross-validation or a half failed."""
+    if comparison.halves is None or any(isinstance(h, str) for h in comparison.halves):
+        return None
+    even, odd = comparison.halves
+    ve, vo = _values(even), _values(odd)
+    out = []
+    for n in _estimated(result):
+        k = SHOWN_SCALE.get(n, 1.0)
+        sigma = float(np.hypot(even.std.get(n, 0.0) * k, odd.std.get(n, 0.0) * k))
+        diff = (ve[n] - vo[n]) * k
+        out.append((n, diff, sigma, abs(diff) / sigma if sigma > 0 else np.inf))
+    return out
+
+
 def _values(r: CalibrationResult) -> dict[str, float]:
     return dict(zip(PARAMS, map(float, np.r_[pack_intrinsics(r.K, r.D), r.depth_bias])))
 
@@ -265,8 +282,17 @@ def _page(title: str, sections: list[tuple[str, str, str]]) -> str:
 
 
 # -- sections ----------------------------------------------------------------------------------
-def _section_summary(result: CalibrationResult, views: Sequence[View], options: dict) -> str:
-    if result.ok:
+def _section_summary(result: CalibrationResult, views: Sequence[View], options: dict,
+                     comparison: _Comparison) -> str:
+    # the banner agrees with the cross-validation below: passing every check is not "trusted"
+    # when the halves of the views disagree beyond their stated uncertainties
+    apart = [(n, r) for n, _, _, r in _half_ratios(result, comparison) or [] if r > CONSISTENT_SIGMAS]
+    if result.ok and apart:
+        verdict = ('<div class="warn"><b>Passes every check, but the cross-validation disagrees:</b> the even and odd '
+                   "views give " + _e(", ".join(f"{n} {r:.1f}" for n, r in apart)) + " predicted standard "
+                   "deviations apart (see Cross-validation). The stated uncertainties understate the real ones: "
+                   "take them as lower bounds, and add views at other distances, tilts and image regions.</div>")
+    elif result.ok:
         verdict = '<div class="ok"><b>Trusted:</b> the calibration passes every check.</div>'
     else:
         verdict = ('<div class="bad"><b>Do not trust this calibration:</b><ul>'
@@ -629,12 +655,9 @@ def _section_cross_validation(result: CalibrationResult, comparison: _Comparison
             return intro + f'<p class="bad">The {name} views could not be calibrated: {_e(half)}</p>'
     ve, vo = _values(even), _values(odd)
     rows, classes, ratios, names = [], [], [], []
-    for n in _estimated(result):
+    for n, diff, sigma, ratio in _half_ratios(result, comparison):
         k = SHOWN_SCALE.get(n, 1.0)
         se, so = even.std.get(n, 0.0) * k, odd.std.get(n, 0.0) * k
-        sigma = float(np.hypot(se, so))
-        diff = (ve[n] - vo[n]) * k
-        ratio = abs(diff) / sigma if sigma > 0 else np.inf
         ok = ratio <= CONSISTENT_SIGMAS
         dec = _decimals(sigma)
         rows.append([_e(n), _num(ve[n] * k, dec), _std(se), _num(vo[n] * k, dec), _std(so), _num(diff, dec),
