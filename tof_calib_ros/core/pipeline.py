@@ -37,7 +37,7 @@ from .planarize import (
     fit_samples,
     sample_depth,
 )
-from .result import INTRINSIC_NAMES, MAX_CORNER_DEPTH_DISAGREEMENT, CalibrationResult, ViewReport
+from .result import INTRINSIC_NAMES, MAX_CORNER_DEPTH_DISAGREEMENT, CalibrationResult, ViewReport, noise_per_dof
 from .traditional import Traditional, calibrate_opencv
 
 MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
@@ -330,9 +330,7 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
     if corner_fit is not None:
         std = _std(corner_fit)
         corner_focal = (*map(float, corner_fit.state.intrinsics[:2]), std["fx"], std["fy"])
-        r = np.concatenate([p.ravel() for p in corner_fit.pixel_residuals])
-        dof = r.size - 6 * len(views) - len(corner_fit.free_global)
-        corner_noise = (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan"), int(dof))
+        corner_noise = noise_per_dof(corner_fit.pixel_residuals, len(corner_fit.free_global))
     return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
                              _std(fit), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
                              board.square, corner_noise=corner_noise)

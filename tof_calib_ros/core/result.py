@@ -34,6 +34,14 @@ MAX_PIXEL_NOISE_RATIO = 1.6
 MIN_PIXEL_EXCESS = 0.02      # px
 
 
+def noise_per_dof(pixel_residuals: list[np.ndarray], n_intrinsics: int) -> tuple[float, int]:
+    """The pixel noise per degree of freedom (px) of a fit's per-view residuals, and those
+    degrees: each view's 6 pose parameters and the ``n_intrinsics`` estimated fit noise too."""
+    r = np.concatenate([p.ravel() for p in pixel_residuals])
+    dof = r.size - 6 * len(pixel_residuals) - n_intrinsics
+    return (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan")), int(dof)
+
+
 @dataclass
 class ViewReport:
     """Per-view figures: what a person looks at to find a bad view."""
@@ -85,11 +93,9 @@ class CalibrationResult:
 
     @property
     def pixel_noise(self) -> tuple[float, int]:
-        """The pixel noise per degree of freedom (px) and those degrees: 6 pose parameters a view
-        and the intrinsics of the lens model taken are not free to fit noise."""
-        r = np.concatenate([v.pixel_residuals.ravel() for v in self.views])
-        dof = r.size - 6 * len(self.views) - 4 - len(DISTORTION_TERMS.get(self.model.distortion, []))
-        return (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan")), int(dof)
+        """The pixel noise per degree of freedom (px) and those degrees, with the lens model taken."""
+        return noise_per_dof([v.pixel_residuals for v in self.views],
+                             4 + len(DISTORTION_TERMS.get(self.model.distortion, [])))
 
     @property
     def verdict(self) -> list[str]:
