@@ -434,7 +434,7 @@ def faults(log=print) -> dict:
     # bad command lines: exit 2 before any frame is read
     board = ["--size", "5x7", "--square", "0.03"]
     bad = [["--size", "2x5"], ["--size", "0x0"], ["--size", "1x1"], ["--slop", "-1"], ["--depth-scale", "1e300"],
-           ["--depth-bias", "offset+wiggle"], ["--square", "30"]]
+           ["--depth-bias", "offset+wobble"], ["--square", "30"]]
     results = [_cli("bag", work / "never_read", *board, "--output", work / "o", *b) for b in bad]
     row("bad command line values", len(bad), sum(code == 2 for code, _, _ in results), 0,
         sum("Traceback" in text for _, text, _ in results), 0)

@@ -315,7 +315,7 @@ def test_bad_command_lines_exit_2(capsys, tmp_path):
                                   ("--slop", "-1", "sync.slop must be at least 0, got -1.0"),
                                   ("--depth-scale", "1e300", "depth.scale must be at most 10, got 1e+300"),
                                   ("--square", "30", "board.square must be at most 10, got 30.0"),
-                                  ("--depth-bias", "offset+wiggle", "depth_bias must be 'none' or terms")):
+                                  ("--depth-bias", "offset+wobble", "depth_bias must be 'none' or terms")):
         argv = ["bag", str(tmp_path / "never_read"), *BOARD, "--output", str(tmp_path / "o"), option, value]
         with pytest.raises(SystemExit) as exc:
             main(argv)

@@ -44,7 +44,7 @@ def test_the_node_declares_every_setting_with_its_range():
 
 @pytest.mark.parametrize("name, value, reason, on_the_command_line", [
     ("views.min", 2, "views.min must be at least 3, got 2", True),
-    ("depth.bias", "offset+wiggle", "depth.bias: depth_bias must be 'none' or terms", True),
+    ("depth.bias", "offset+wobble", "depth.bias: depth_bias must be 'none' or terms", True),
     ("calibration.loss", "l2", "calibration.loss must be one of 'none', 'huber', 'cauchy', got 'l2'", True),
     ("camera_name", "my camera", "camera_name: camera name 'my camera' must be letters, digits and '_'", True),
     ("sync.slop", "0.1", "sync.slop must be float, got '0.1'", False),   # a node parameter of the wrong type
@@ -59,10 +59,20 @@ def test_one_refusal_in_the_same_words_for_node_and_cli(name, value, reason, on_
     assert refusal({"views.min": 20, "views.max": 10}).startswith("views.min (20) must not exceed views.max (10)")
 
 
+def test_the_wiggle_term_is_refused_without_the_modulation_frequency(capsys):
+    needs = "depth.bias: the wiggle term needs depth.modulation_mhz"
+    assert refusal({"depth.bias": "offset+wiggle", "depth.modulation_mhz": 0.0}).startswith(needs)
+    assert refusal({"depth.bias": "offset+wiggle", "depth.modulation_mhz": 20.0}) is None
+    with pytest.raises(SystemExit):
+        cli.main(["bag", "x", "--size", "5x7", "--square", "0.03", "--output", "o", "--depth-bias", "offset+wiggle"])
+    assert needs in capsys.readouterr().err
+    assert calibration_options(defaults() | {"depth.modulation_mhz": 20.0})["modulation_hz"] == 20e6
+
+
 def test_the_settings_reach_calibrate_and_the_collector():
     values = defaults() | {"calibration.loss": "huber", "depth.bias": "offset+tilt", "views.max": 30}
     assert calibration_options(values) == {"depth_convention": "z", "depth_bias": "offset+tilt", "distortion": "auto",
-                                           "loss": "huber", "plane_squares": "auto"}
+                                           "loss": "huber", "plane_squares": "auto", "modulation_hz": None}
     assert calibration_options(defaults())["loss"] is None
     config = collector_config(values, stills=True)
     assert (config.max_views, config.min_views, config.stills) == (30, 8, True)

@@ -158,10 +158,13 @@ def test_offset_and_wiggling():
     assert np.allclose(f.depth - f.depth_true, 0.025, atol=1e-6)
     noisy = sim.render(CAMERA, BOARD, *TILTED, noise=sim.Noise(offset=0.025, depth_const=0.005))
     assert np.mean(noisy.depth - noisy.depth_true) == pytest.approx(0.025, abs=0.001)
+    # the wiggle follows the radial distance (the light's path), carried into a z-depth
     w = sim.Noise(wiggle_amplitude=0.005, wiggle_period=0.5, wiggle_phase=0.3)
+    radial = sim.render(CAMERA, BOARD, *TILTED, noise=w, convention="radial")
+    assert np.allclose(radial.depth - radial.depth_true, 0.005 * np.sin(2 * np.pi * radial.depth_true / 0.5 + 0.3),
+                       atol=1e-6)
     g = sim.render(CAMERA, BOARD, *TILTED, noise=w)
-    expected = 0.005 * np.sin(2 * np.pi * g.depth_true / 0.5 + 0.3)
-    assert np.allclose(g.depth - g.depth_true, expected, atol=1e-6)
+    assert np.allclose(g.depth / g.depth_true, radial.depth / radial.depth_true, equal_nan=True)
 
 
 @pytest.mark.parametrize("invalid", [np.nan, 0.0])

@@ -25,7 +25,7 @@ LOSSES = ("none", "huber", "cauchy")
 
 def _depth_model(value: str) -> str | None:
     try:
-        CalibrationOptions(depth_bias=value)   # calibrate's own check
+        CalibrationOptions(depth_bias=value, modulation_hz=20e6)   # calibrate's own check of the terms
     except CalibrationError as exc:
         return str(exc)
     return None
@@ -88,8 +88,11 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
     Setting("depth.scale", 0.001, "metres per count of integer (16UC1) depth; 0.001: millimetres",
             flag="--depth-scale", low=1e-6, high=10.0),
     Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, and "
-            "scale and tilt where the data call for them), none, or offset, scale, tilt joined by +",
+            "tilt and wiggle where the data call for them), none, or offset, scale, tilt, wiggle joined by +",
             flag="--depth-bias", check=_depth_model),
+    Setting("depth.modulation_mhz", 0.0, "the ToF camera's modulation frequency, MHz: given, the depth model also "
+            "weighs a wiggling error of period c / (8 f) (1.87 m at 20 MHz); 0: not known, no wiggling term",
+            flag="--modulation-mhz", low=0.0, high=10000.0),
     Setting("calibration.distortion", "auto", "distortion terms: auto (those the data call for) or none, "
             "k1, k1k2, plumb_bob, full", flag="--distortion", choices=("auto", *DISTORTION_TERMS)),
     Setting("calibration.loss", "none", "robust loss against misdetected corners: none, huber or cauchy",
@@ -125,6 +128,10 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
 )}
 
 
+# Settings checked together: a change to one is judged with the other's value.
+LINKED = (("views.min", "views.max"), ("depth.bias", "depth.modulation_mhz"))
+
+
 def refusal(values: Mapping[str, Any]) -> str | None:
     """Why these values (settings by name; others as they are) cannot stand together, or None."""
     for name, value in values.items():
@@ -132,6 +139,8 @@ def refusal(values: Mapping[str, Any]) -> str | None:
         reason = f"no setting named {name!r}" if setting is None else setting.refusal(value)
         if reason:
             return reason
+    if "wiggle" in str(values.get("depth.bias", "")).split("+") and values.get("depth.modulation_mhz") == 0:
+        return "depth.bias: the wiggle term needs depth.modulation_mhz, which sets the wiggle's period"
     lo, hi = values.get("views.min"), values.get("views.max")
     if lo is not None and hi is not None and lo > hi:
         return f"views.min ({lo}) must not exceed views.max ({hi}): calibration could never start"
@@ -143,7 +152,8 @@ def calibration_options(values: Mapping[str, Any]) -> dict[str, Any]:
     loss = values["calibration.loss"]
     return {"depth_convention": values["depth.convention"], "depth_bias": values["depth.bias"],
             "distortion": values["calibration.distortion"], "loss": None if loss == "none" else loss,
-            "plane_squares": values["calibration.plane_squares"]}
+            "plane_squares": values["calibration.plane_squares"],
+            "modulation_hz": values["depth.modulation_mhz"] * 1e6 or None}
 
 
 def collector_config(values: Mapping[str, Any], stills: bool = False) -> CollectorConfig:

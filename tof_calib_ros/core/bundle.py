@@ -1,7 +1,7 @@
 """The joint Levenberg-Marquardt over pixel and depth residuals (the paper's Eq. 8).
 
 Parameters: the intrinsics ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``, the depth bias
-``[offset, scale, tilt_x, tilt_y]`` (see depth_bias) and one pose ``[rvec, tvec]`` per view.
+``[offset, scale, tilt_x, tilt_y, wiggle_sin, wiggle_cos]`` (see depth_bias) and one pose ``[rvec, tvec]`` per view.
 Each view's pixel and depth residuals are divided by that view's standard deviations, so
 that millimetres and pixels can be added. The Jacobian is analytic and block-sparse: a pose
 touches only its own view's rows. So the normal equations are solved as in bundle
@@ -73,6 +73,7 @@ class Fit:
     sigma_px: np.ndarray                # per view, the pixel and depth noise the fit assumed
     sigma_depth: np.ndarray
     weights: list[np.ndarray] | None    # per corner, the robust loss's weights
+    wiggle_period: float | None = None  # m, the depth model's wiggling period, where it has one
 
 
 @dataclass
@@ -97,9 +98,11 @@ class Problem:
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
                  sigma_depth: np.ndarray, free_global, free_poses: bool = True,
-                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None):
+                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None,
+                 wiggle_period: float | None = None):
         self.n_views = len(views)
         self.convention = convention
+        self.wiggle_period = wiggle_period
         self.free_global = np.asarray(free_global, dtype=int)
         self.free_poses = free_poses
         self.points = np.concatenate([v.object_points for v in views])
@@ -140,7 +143,7 @@ class Problem:
         pr = project(X, state.intrinsics, jac)
         d, dd = depth_of(X, self.convention)
         dpix = pr.pixels - self.pixels
-        ddep = depth_bias.measured(state.bias, d, X) - self.depth
+        ddep = depth_bias.measured(state.bias, d, X, self.wiggle_period) - self.depth
         if not jac:
             return dpix, ddep, None, None
         n = len(X)
@@ -148,10 +151,17 @@ class Problem:
         jp[:, :, :4] = pr.d_k
         jp[:, :, 4:9] = pr.d_dist
         jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
-        _, scale, tx, ty = state.bias
+        _, scale, tx, ty, ws, wc = state.bias
         jd = np.zeros((n, N_GLOBAL + 6))
-        jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack([np.ones(n), d, X[:, 0], X[:, 1]])
+        r = np.linalg.norm(X, axis=1)
+        jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack(
+            [np.ones(n), d, X[:, 0], X[:, 1], depth_bias.wiggle_basis(self.wiggle_period, d, r)])
         grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
+        if self.wiggle_period is not None:   # the wiggle f(r) d / r moves with the point too
+            k = 2 * np.pi / self.wiggle_period
+            f = ws * np.sin(k * r) + wc * np.cos(k * r)
+            df = k * (ws * np.cos(k * r) - wc * np.sin(k * r))
+            grad = grad + ((df * d / r ** 2 - f * d / r ** 3)[:, None] * X + (f / r)[:, None] * dd)
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
 
@@ -286,17 +296,19 @@ def _robust_sigma(values: np.ndarray, floor: float) -> float:
 
 def solve(views: list[Observations], state: State, convention: str, free_global, free_poses: bool = True,
           rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
-          max_iter: int = 100, prior_sigma: np.ndarray | None = None) -> Fit:
+          max_iter: int = 100, prior_sigma: np.ndarray | None = None, wiggle_period: float | None = None) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
     normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners.
-    ``prior_sigma``: the depth terms' priors, where not the defaults."""
+    ``prior_sigma``: the depth terms' priors, where not the defaults; ``wiggle_period``: the
+    depth's wiggling period (m), where the depth model has one."""
     n = len(views)
     sigma_px = np.ones(n)
     sigma_d = np.full(n, 0.01)
     weights = None
     total_it = 0
     for _ in range(rounds):
-        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma)
+        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma,
+                          wiggle_period)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
         dpix, ddep, _, _ = problem.raw(state)
@@ -317,14 +329,16 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
-    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma)
+    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma,
+                      wiggle_period)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.
     cov = global_covariance(_normal(J, r, n), free_poses) * max((r @ r) / dof, 1.0)
     dpix, ddep, _, _ = problem.raw(state)
     return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
-               problem.free_global, float(r @ r), total_it, problem_sigmas[0], problem_sigmas[1], weights)
+               problem.free_global, float(r @ r), total_it, problem_sigmas[0], problem_sigmas[1], weights,
+               wiggle_period)
 
 
 def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
@@ -332,7 +346,8 @@ def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
     first order (the score test): the Gauss-Newton step's predicted gain, with the noise the fit
     assumed. At the fit's optimum only the extra parameters contribute to it."""
     free = np.r_[fit.free_global, np.asarray(extra, dtype=int)]
-    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, free, True, fit.weights)
+    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, free, True, fit.weights,
+                      wiggle_period=fit.wiggle_period)
     r, J = problem.evaluate(fit.state, True)
     N = _normal(J, r, len(views))
     dg, dp = _solve_normal(N, 1e-9, True)

@@ -1,11 +1,16 @@
 """The ToF depth error model estimated alongside the intrinsics (beyond the paper).
 
     measured = (1 + scale) * depth + offset + tilt_x * X + tilt_y * Y
+               + (wiggle_sin * sin(2 pi r / period) + wiggle_cos * cos(2 pi r / period)) * depth / r
 
 ``offset`` is the systematic range offset of real ToF cameras (about 25 mm on a Kinect v2);
 ``scale`` a modulation-frequency error; ``tilt`` a depth axis not quite along the optical
 axis, which is what a driver's z-depth computed with its own factory principal point looks
-like to first order. Left out of the model, each of them biases the intrinsics.
+like to first order. The wiggling term is the periodic error of a continuous-wave ToF camera
+(Lindner and Kolb): a function of the light's path, the radial distance ``r``, whose period
+the modulation sets (c / (8 f) for four-phase sampling: 1.87 m at 20 MHz), so it is only
+estimated when the period is given; ``depth / r`` carries it into a z-depth. Left out of the
+model, each of them biases the intrinsics.
 """
 from __future__ import annotations
 
@@ -13,11 +18,16 @@ import numpy as np
 
 from .errors import CalibrationError
 
-NAMES = ("depth_offset", "depth_scale", "depth_tilt_x", "depth_tilt_y")
+NAMES = ("depth_offset", "depth_scale", "depth_tilt_x", "depth_tilt_y", "depth_wiggle_sin", "depth_wiggle_cos")
 N_BIAS = len(NAMES)
-TERMS = {"offset": [0], "scale": [1], "tilt": [2, 3]}
-# Weak priors (offset in metres, the rest unitless) keep terms the views cannot separate finite.
-PRIOR_SIGMA = np.array([0.1, 0.05, 0.05, 0.05])
+TERMS = {"offset": [0], "scale": [1], "tilt": [2, 3], "wiggle": [4, 5]}
+TERMS_ADDED_LATER = ("depth_wiggle_sin", "depth_wiggle_cos")   # calibration files before them lack them
+# Weak priors (offset and wiggle in metres, the rest unitless) keep terms the views cannot separate finite.
+PRIOR_SIGMA = np.array([0.1, 0.05, 0.05, 0.05, 0.05, 0.05])
+SPEED_OF_LIGHT = 299_792_458.0
+# Steps of the fixed-point inversion of the wiggle: each shrinks the error by the wiggle's
+# slope, 2 pi amplitude / period (0.05 for 15 mm at 1.87 m).
+INVERSE_STEPS = 4
 
 
 def parse(spec: str) -> list[int]:
@@ -31,13 +41,37 @@ def parse(spec: str) -> list[int]:
     return sorted(i for n in names for i in TERMS[n])
 
 
-def measured(bias: np.ndarray, depth: np.ndarray, points: np.ndarray) -> np.ndarray:
+def wiggle_period(modulation_hz: float) -> float:
+    """The wiggling error's period in distance (m) of a four-phase ToF camera at this modulation."""
+    return SPEED_OF_LIGHT / (8.0 * modulation_hz)
+
+
+def wiggle_basis(period: float | None, depth: np.ndarray, radial: np.ndarray) -> np.ndarray:
+    """(N, 2) the wiggle's sine and cosine terms in the depth's convention (zeros without a period)."""
+    if period is None:
+        return np.zeros((len(depth), 2))
+    phase = 2 * np.pi * radial / period
+    return np.column_stack([np.sin(phase), np.cos(phase)]) * (depth / radial)[:, None]
+
+
+def measured(bias: np.ndarray, depth: np.ndarray, points: np.ndarray, period: float | None = None) -> np.ndarray:
     """The depth the camera reports for camera-frame points whose true depth is ``depth``."""
-    offset, scale, tx, ty = bias
-    return (1 + scale) * depth + offset + tx * points[:, 0] + ty * points[:, 1]
+    offset, scale, tx, ty, ws, wc = bias
+    linear = (1 + scale) * depth + offset + tx * points[:, 0] + ty * points[:, 1]
+    if period is None or (ws == 0 and wc == 0):
+        return linear
+    return linear + wiggle_basis(period, depth, np.linalg.norm(points, axis=1)) @ np.array([ws, wc])
 
 
-def true_depth(bias: np.ndarray, reported: np.ndarray, directions: np.ndarray) -> np.ndarray:
+def true_depth(bias: np.ndarray, reported: np.ndarray, directions: np.ndarray,
+               period: float | None = None) -> np.ndarray:
     """Inverse of ``measured`` along rays scaled so that the point is depth x direction."""
-    offset, scale, tx, ty = bias
-    return (reported - offset) / (1 + scale + tx * directions[:, 0] + ty * directions[:, 1])
+    offset, scale, tx, ty, ws, wc = bias
+    gain = 1 + scale + tx * directions[:, 0] + ty * directions[:, 1]
+    depth = (reported - offset) / gain
+    if period is None or (ws == 0 and wc == 0):
+        return depth
+    ray = np.linalg.norm(directions, axis=1)
+    for _ in range(INVERSE_STEPS):
+        depth = (reported - offset - wiggle_basis(period, depth, depth * ray) @ np.array([ws, wc])) / gain
+    return depth

@@ -28,7 +28,9 @@ class CalibrationOptions:
     'none', or terms from 'offset', 'scale', 'tilt' joined by '+'. ``distortion``: 'auto' (the
     plumb_bob terms the data call for) or a preset of ``DISTORTION_TERMS``. ``plane_squares``:
     'auto' (the whole board unless the black squares read apart from the white), 'white' (the
-    paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'."""
+    paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'. ``modulation_hz``: the camera's
+    modulation frequency, which sets the period of its wiggling error; given, 'auto' also
+    weighs a wiggling term (see depth_bias), which cannot be estimated without it."""
 
     method: str = "depth"
     depth_convention: str = "z"
@@ -38,13 +40,21 @@ class CalibrationOptions:
     loss: str | None = None
     plane_squares: str = "auto"
     min_views: int = 3
+    modulation_hz: float | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise CalibrationError(f"method must be 'depth' or 'traditional', got {self.method!r}")
         check_convention(self.depth_convention)
+        if self.modulation_hz is not None and not (isinstance(self.modulation_hz, (int, float))
+                                                   and 1e5 <= self.modulation_hz <= 1e10):
+            raise CalibrationError(f"modulation_hz must be a frequency from 100 kHz to 10 GHz or None, "
+                                   f"got {self.modulation_hz!r}")
         if self.depth_bias != "auto":
-            bias_model.parse(self.depth_bias)
+            terms = bias_model.parse(self.depth_bias)
+            if self.modulation_hz is None and set(bias_model.TERMS["wiggle"]) & set(terms):
+                raise CalibrationError("the wiggle term needs the camera's modulation frequency (modulation_hz): "
+                                       "it sets the wiggle's period")
         if not isinstance(self.distortion, str) or self.distortion not in ("auto", *DISTORTION_TERMS):
             raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
                                    f"got {self.distortion!r}")
@@ -58,7 +68,13 @@ class CalibrationOptions:
         """These options with every 'auto' replaced by what ``model`` chose: the same
         calibration on other views (halves, held-out views) without choosing again."""
         return CalibrationOptions(self.method, self.depth_convention, self.depth_units, model.depth_bias,
-                                  model.distortion, self.loss, model.plane_squares, self.min_views)
+                                  model.distortion, self.loss, model.plane_squares, self.min_views,
+                                  self.modulation_hz)
+
+    @property
+    def wiggle_period(self) -> float | None:
+        """The wiggling error's period (m), where the modulation frequency is known."""
+        return None if self.modulation_hz is None else bias_model.wiggle_period(self.modulation_hz)
 
     def to_dict(self) -> dict:
         return asdict(self)

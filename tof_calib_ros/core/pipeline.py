@@ -226,9 +226,11 @@ class _PlaneSamples:
 
 
 def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
-                   convention: str) -> tuple[list[np.ndarray], list[float], list[Plane | None]]:
+                   convention: str, period: float | None = None
+                   ) -> tuple[list[np.ndarray], list[float], list[Plane | None]]:
     """Corner depths as the camera would report them (the plane is fitted to bias-corrected
     depth, where the board really is flat), each view's depth error floor, and the planes.
+    ``period``: the wiggle's, where the bias has one.
     A view without usable depth gets NaN depths: it counts with its corners only."""
     corner_dirs = np.split(directions(np.concatenate([v.corners for v in views]), intr, convention),
                            np.cumsum([len(v.corners) for v in views])[:-1])
@@ -239,9 +241,9 @@ def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndar
             floors.append(0.0)
             planes.append(None)
             continue
-        plane = fit_plane_to(su, bias_model.true_depth(bias, smp.depth, su), smp.pixels, smp.black)
+        plane = fit_plane_to(su, bias_model.true_depth(bias, smp.depth, su, period), smp.pixels, smp.black)
         d, se = corner_depth_along(plane, u)
-        depths.append(bias_model.measured(bias, d, u * d[:, None]))
+        depths.append(bias_model.measured(bias, d, u * d[:, None], period))
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
     return depths, floors, planes
@@ -339,7 +341,7 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
               depth_convention: str = "z", method: str = "depth", *, depth_units: float | None = None,
               depth_bias: str = "auto", distortion: str = "auto", loss: str | None = None,
-              plane_squares: str = "auto", min_views: int = 3,
+              plane_squares: str = "auto", min_views: int = 3, modulation_hz: float | None = None,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
     """Calibrate a ToF camera from checkerboard views.
 
@@ -356,7 +358,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
     _check_arguments(views, board, image_size, depth_units, min_views, progress)
     options = CalibrationOptions(method, depth_convention, depth_units, depth_bias, distortion, loss, plane_squares,
-                                 min_views)
+                                 min_views, modulation_hz)
     try:
         return _calibrate_with_loss(views, board, image_size, options, progress)
     except CalibrationError:   # a ValueError too, and already the caller's
@@ -446,7 +448,11 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     parameter, n being the independent measurements. Distortion grows along its presets
     (k1, k2, then p1 p2, then k3); because the depth fixes each view's pose, it is observable
     from 4 corners a view. The depth always has its offset; the tilt (a driver's z-depth
-    computed about another centre) is taken when it pays. A depth scale is never chosen
+    computed about another centre) is taken when it pays. Where the modulation frequency is
+    given, the wiggle is always estimated: near frontal views cannot tell it from the focal
+    length (its slope over their distances is a depth scale), so a test of it there would
+    pass it over and trust a focal length it has bent; estimated, its uncertainty is the
+    focal length's. A depth scale is never chosen
     here: it would make the depth silent on the focal length (the two trade exactly), a ToF
     camera's scale is set by its modulation frequency, and a scale the data seem to call for
     is a wrong square size or depth unit, which the verdict reports."""
@@ -455,12 +461,13 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     if options.distortion != "auto":
         base += DISTORTION_TERMS[options.distortion]
         model.distortion = options.distortion
+    period = options.wiggle_period
     if options.depth_bias == "auto":
-        depth_terms, candidates = ["offset"], ["tilt"]
+        depth_terms, candidates = ["offset"] + (["wiggle"] if period is not None else []), ["tilt"]
     else:
         depth_terms, candidates = ([] if options.depth_bias == "none" else options.depth_bias.split("+")), []
     base += [N_INTRINSICS + k for k in bias_model.parse("+".join(depth_terms) or "none")]
-    fit = bundle.solve(observations, state, convention, base, loss=options.loss)
+    fit = bundle.solve(observations, state, convention, base, loss=options.loss, wiggle_period=period)
     price = np.log(bundle.n_observations(observations))
 
     def tested(name: str, terms: list[int]) -> float:
@@ -481,7 +488,7 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
                 break
             free += extra[best]
             model.distortion = best
-            fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss)
+            fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss, wiggle_period=period)
     while candidates:
         net = {c: tested(c, [N_INTRINSICS + k for k in bias_model.TERMS[c]]) for c in candidates}
         best = max(net, key=net.get)
@@ -490,12 +497,14 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
         candidates.remove(best)
         depth_terms.append(best)
         free += [N_INTRINSICS + k for k in bias_model.TERMS[best]]
-        fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss)
+        fit = bundle.solve(observations, fit.state, convention, free, loss=options.loss, wiggle_period=period)
     model.depth_bias = "+".join(depth_terms) or "none"
     if options.distortion == "auto" or options.depth_bias == "auto":
         model.reasons.append(f"chosen by the data: distortion {model.distortion}, depth terms {model.depth_bias} ("
                              + ", ".join(f"{k} {v['gain']:.1f} vs {v['price']:.1f}" for k, v in model.evidence.items())
-                             + ": the cost each term would remove against its price)")
+                             + ": the cost each term would remove against its price)"
+                             + (f"; the wiggle always, of period {period:.3f} m from the modulation frequency"
+                                if period is not None and options.depth_bias == "auto" else ""))
         say(model.reasons[-1])
     return fit.state, sorted(free), model
 
@@ -508,11 +517,13 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
     convention = options.depth_convention
     for _ in range(MAX_OUTER_ROUNDS):
         before = np.r_[state.intrinsics, state.bias]
-        fit = bundle.solve(observations, state, convention, free, loss=options.loss, prior_sigma=prior)
+        fit = bundle.solve(observations, state, convention, free, loss=options.loss, prior_sigma=prior,
+                           wiggle_period=options.wiggle_period)
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias, convention)
+        depths, floors, planes = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias, convention,
+                                                options.wiggle_period)
         observations = _observations(obj, prepared, depths, floors)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
@@ -608,7 +619,7 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         X = transform_views(np.r_[rvec.ravel(), tvec.ravel()][None], o, np.zeros(len(o), dtype=int))[0]
         from_pixels = float(np.mean(depth_of(X, convention)[0]))
         u = directions(v.corners, fit.state.intrinsics, convention)
-        from_depth = float(np.mean(bias_model.true_depth(bias, d, u)))
+        from_depth = float(np.mean(bias_model.true_depth(bias, d, u, fit.wiggle_period)))
         spread_px = np.sqrt(np.mean(np.sum((v.corners - v.corners.mean(0)) ** 2, axis=1)))
         px = max(float(np.sqrt(np.mean(fit.pixel_residuals[j] ** 2))), bundle.MIN_NOISE[0])
         plane_se = max(float(np.median(corner_depth_along(plane, u)[1])), bundle.MIN_NOISE[1])

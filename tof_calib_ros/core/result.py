@@ -65,7 +65,7 @@ class CalibrationResult:
     depth_convention: str
     K: np.ndarray
     D: np.ndarray
-    depth_bias: np.ndarray        # [offset (m), scale, tilt_x, tilt_y], see core.depth_bias
+    depth_bias: np.ndarray        # [offset (m), scale, tilt_x, tilt_y, wiggle sin, cos (m)], see core.depth_bias
     std: dict[str, float]
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)

@@ -46,6 +46,7 @@ class Calibration:
     depth_bias: np.ndarray
     depth_convention: str | None
     source: str
+    wiggle_period: float | None = None
 
     @property
     def has_depth_model(self) -> bool:
@@ -78,18 +79,22 @@ def load_calibration(yaml_path: str | Path) -> Calibration:
     _refuse_unreadable_model(cam, str(yaml_path))
     D = np.zeros(5)
     D[:cam.D.size] = cam.D
-    bias, convention, source = np.zeros(bias_model.N_BIAS), None, str(yaml_path)
+    bias, convention, period, source = np.zeros(bias_model.N_BIAS), None, None, str(yaml_path)
     sidecar = yaml_path.with_suffix(".json")
     if sidecar.is_file():
         try:
             doc = json.loads(sidecar.read_text())
-            bias = np.array([float(doc["depth_bias"][name]) for name in bias_model.NAMES])
+            # the wiggle's terms are absent from files written before the model had them
+            bias = np.array([float(doc["depth_bias"].get(name, 0.0) if name in bias_model.TERMS_ADDED_LATER
+                                   else doc["depth_bias"][name]) for name in bias_model.NAMES])
             convention = doc["depth_convention"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            hz = doc.get("options", {}).get("modulation_hz")
+            period = None if hz is None else bias_model.wiggle_period(float(hz))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise CalibrationFileError(f"{sidecar}: not a calibration.json with depth_bias and "
                                        f"depth_convention ({exc})") from None
         source += f" with {sidecar.name}"
-    return Calibration(cam.K, D, (cam.width, cam.height), bias, convention, source)
+    return Calibration(cam.K, D, (cam.width, cam.height), bias, convention, source, period)
 
 
 @dataclass
@@ -188,7 +193,8 @@ def check_views(views: Sequence[View], board: Board, calibration: Calibration, c
         pixels.append(residual)
         pixel_rms = float(np.sqrt(np.mean(np.sum(residual ** 2, axis=1))))
         X, _ = transform(rvec.ravel(), tvec.ravel(), obj)
-        predicted = bias_model.measured(calibration.depth_bias, depth_of(X, convention)[0], X)
+        predicted = bias_model.measured(calibration.depth_bias, depth_of(X, convention)[0], X,
+                                        calibration.wiggle_period)
         try:
             measured, plane = planarize(np.asarray(view.depth, dtype=float), corners, np.arange(board.n_corners),
                                         board, params, convention, view.amplitude)

@@ -30,7 +30,7 @@ from ..files.bag_io import STORAGES, BagError, BagSource, TopicError
 from ..files.calibration_file import CalibrationFileError, write_json
 from ..files.image_folder import is_image_folder, scan
 from ..files.output_folder import write_calibration
-from ..settings import SETTINGS, calibration_options, collector_config, defaults, refusal
+from ..settings import LINKED, SETTINGS, calibration_options, collector_config, defaults, refusal
 from ..sim.recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
 from .check import check_views, load_calibration
 
@@ -420,6 +420,7 @@ def _add_calibration(p: argparse.ArgumentParser) -> None:
                         "calibration: its report and figures in DIR/rejected/, nothing else changed)")
     for name in ("depth.bias", "calibration.distortion", "calibration.loss", "calibration.plane_squares"):
         _option(p, name, "TERMS" if name == "depth.bias" else None)
+    _option(p, "depth.modulation_mhz", "MHZ")
     _option(p, "camera_name", "NAME")
 
 
@@ -492,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if getattr(args, "workers", 1) < 1:
         parser.error("--workers must be at least 1")
-    reason = refusal({name: v for name, v in _values(args).items() if name in ("views.min", "views.max")})
+    reason = refusal({name: v for name, v in _values(args).items() if any(name in pair for pair in LINKED)})
     if reason:
         parser.error(reason)
     try:

@@ -108,7 +108,8 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
     say = progress or (lambda _msg: None)
     data = _view_data(views, board, result, result.options.depth_units)
     fixed = result.options.fixed(result.model).to_dict()
-    options = {k: fixed[k] for k in ("depth_units", "depth_bias", "distortion", "loss", "plane_squares")}
+    options = {k: fixed[k] for k in ("depth_units", "depth_bias", "distortion", "loss", "plane_squares",
+                                     "modulation_hz")}
     say("report: calibrating again with the other method and with the even and odd views")
     comparison = _compare(views, data, board, result, options)
     say("report: drawing the figures")
@@ -154,7 +155,7 @@ def _view_data(views: Sequence[View], board: Board, result: CalibrationResult,
         X = transform(rep.rvec, rep.tvec, board.object_points(ids))[0]
         measured = project(X, intr).pixels - rep.pixel_residuals
         distance = depth_of(X, result.depth_convention)[0]
-        model = bias_model.measured(result.depth_bias, distance, X)
+        model = bias_model.measured(result.depth_bias, distance, X, result.options.wiggle_period)
         normal = cv2.Rodrigues(np.asarray(rep.rvec, dtype=float).reshape(3, 1))[0][:, 2]
         out.append(_ViewData(rep.index, ids, measured, rep.pixel_residuals, distance, model,
                              model - rep.depth_residuals, sample_depth(depth, measured),
@@ -527,7 +528,7 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
         return '<p class="note">No view was planarized (a traditional calibration, or no usable depth).</p>'
     d = data[j]
     intr = pack_intrinsics(result.K, result.D)
-    conv, bias = result.depth_convention, result.depth_bias
+    conv, bias, period = result.depth_convention, result.depth_bias, result.options.wiggle_period
     try:
         samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude,
                                 squares=result.model.plane_squares)
@@ -536,13 +537,13 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     # As the calibration does: RANSAC against outliers, then the plane in bias-corrected depth.
     inl = samples.subset(fit_samples(samples, intr, conv, ransac=True).inliers)
     u = directions(inl.pixels, intr, conv)
-    plane = fit_plane_to(u, bias_model.true_depth(bias, inl.depth, u), inl.pixels, inl.black)
+    plane = fit_plane_to(u, bias_model.true_depth(bias, inl.depth, u, period), inl.pixels, inl.black)
 
     def on_plane(pixels: np.ndarray) -> np.ndarray:
         """The depth the camera would report on the fitted plane (bias applied)."""
         du = directions(pixels, intr, conv)
         true = corner_depth_along(plane, du)[0]
-        return bias_model.measured(bias, true, du * true[:, None])
+        return bias_model.measured(bias, true, du * true[:, None], period)
 
     w, h = result.image_size
     rep = result.views[j]

@@ -46,7 +46,7 @@ from ..files.calibration_file import EncodedViews, encode_views, monocular_field
 from ..files.image_decode import ImageError, decode_image, depth_to_metres
 from ..files.image_folder import is_image_folder, scan
 from ..files.output_folder import write_calibration
-from ..settings import SETTINGS, Setting, calibration_options, collector_config, refusal
+from ..settings import LINKED, SETTINGS, Setting, calibration_options, collector_config, refusal
 from .calibration_worker import CalibrationWorker
 from .run import Executor, run
 
@@ -178,10 +178,11 @@ class CalibrationNode(Node):
         """Only checks (it also runs at declaration, before the node is built); a rejected
         value must not touch the node, so ``_apply_parameters`` applies them afterwards."""
         values = {prm.name: prm.value for prm in params if prm.name in SETTINGS}
-        if "views.min" in values or "views.max" in values:   # they are checked together
-            for name in ("views.min", "views.max"):
-                if name not in values and self.has_parameter(name):
-                    values[name] = self._param(name)
+        for pair in LINKED:   # checked together
+            if any(name in values for name in pair):
+                for name in pair:
+                    if name not in values and self.has_parameter(name):
+                        values[name] = self._param(name)
         reason = refusal(values)
         return SetParametersResult(successful=reason is None, reason=reason or "")
 

@@ -85,8 +85,9 @@ class Noise:
     shot noise, so dark squares and far or tilted boards are noisier. ``depth_const`` (m) is
     added in quadrature to every pixel (the paper's protocol: 10 mm white noise). ``offset`` (m)
     is a systematic bias (a Kinect v2 reads about +25 mm). The wiggling error is
-    ``wiggle_amplitude * sin(2 pi d / wiggle_period + wiggle_phase)`` of the true depth ``d`` in
-    the frame's convention. ``invalid_fraction`` of pixels, drawn at random, lose their depth.
+    ``wiggle_amplitude * sin(2 pi r / wiggle_period + wiggle_phase)`` of the true radial distance
+    ``r`` (the light's path, which the phase measures), carried into the frame's convention.
+    ``invalid_fraction`` of pixels, drawn at random, lose their depth.
     ``amplitude`` is the amplitude standard deviation as a fraction of full scale. ``dark_offset``
     (m): dark surfaces read farther, by this much times (1 - albedo / white's), as real ToF
     cameras read the black squares (about 0.89 of it on a black square).
@@ -416,8 +417,10 @@ def _sense(camera: SimCamera, board: Board, pose: tuple[np.ndarray, np.ndarray],
     # Draws happen in a fixed order so a seed always gives the same frame.
     depth = depth_true + noise.offset + noise.dark_offset * (1 - albedo / a_ref)
     if noise.wiggle_amplitude > 0:
+        xy = _centre_normalized(camera.params.tobytes(), W, H)
+        per_depth = np.sqrt(xy[..., 0] ** 2 + xy[..., 1] ** 2 + 1.0) if conv == "z" else 1.0   # r / depth
         depth = depth + noise.wiggle_amplitude * np.sin(
-            2 * np.pi * depth_true / noise.wiggle_period + noise.wiggle_phase)
+            2 * np.pi * depth_true * per_depth / noise.wiggle_period + noise.wiggle_phase) / per_depth
     if noise.depth > 0 or noise.depth_const > 0:
         sigma2 = noise.depth_const ** 2 + noise.depth ** 2 * a_ref / np.maximum(amp, 1e-9 * a_ref)
         depth = depth + gen.standard_normal((H, W)) * np.sqrt(sigma2)
