@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, sim
+from tof_calib_ros.core.depth_bias import TERMS_ADDED_LATER
 from tof_calib_ros.files.bag_io import IMAGE, BagWriter
 from tof_calib_ros.files.calibration_file import read_camera_yaml, save_views, write_camera_yaml
 from tof_calib_ros.offline.cli import (
@@ -413,6 +414,19 @@ def test_check_passes_the_calibration_and_fails_the_factory_one(bags, calibrated
     doc = json.loads((tmp_path / "check.json").read_text())
     assert doc["pixel_rms"] < 0.2 and abs(doc["depth_mean_m"]) < 0.002 and len(doc["views"]) >= 15
     assert abs(doc["depth_scale"]) < 0.003 and all(v["plane_sigma"] < 0.005 for v in doc["views"])
+    # a calibration.json from before the wiggle term (neither its terms nor a modulation) reads the same
+    older = tmp_path / "older" / "calibration.yaml"
+    older.parent.mkdir()
+    older.write_bytes((calibrated / "calibration.yaml").read_bytes())
+    sidecar = json.loads((calibrated / "calibration.json").read_text())
+    for name in TERMS_ADDED_LATER:
+        del sidecar["depth_bias"][name]
+    del sidecar["options"]["modulation_hz"]
+    older.with_suffix(".json").write_text(json.dumps(sidecar))
+    code, out_older, err = run(capsys, "check", older, bags["mcap"], *BOARD)
+    assert code == EXIT_OK, err
+    depth_line = re.compile(r"depth residuals.*")
+    assert depth_line.search(out_older)[0] == depth_line.search(out)[0]
     # the YAML alone: the camera's 20 mm depth offset is then unknown, and not held against it
     alone = tmp_path / "alone" / "calibration.yaml"
     alone.parent.mkdir()
