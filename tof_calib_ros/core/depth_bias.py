@@ -21,7 +21,7 @@ from .errors import CalibrationError
 NAMES = ("depth_offset", "depth_scale", "depth_tilt_x", "depth_tilt_y", "depth_wiggle_sin", "depth_wiggle_cos")
 N_BIAS = len(NAMES)
 TERMS = {"offset": [0], "scale": [1], "tilt": [2, 3], "wiggle": [4, 5]}
-TERMS_ADDED_LATER = ("depth_wiggle_sin", "depth_wiggle_cos")   # calibration files before them lack them
+TERMS_ADDED_LATER = tuple(NAMES[i] for i in TERMS["wiggle"])   # calibration files before them lack them
 # Weak priors (offset and wiggle in metres, the rest unitless) keep terms the views cannot separate finite.
 PRIOR_SIGMA = np.array([0.1, 0.05, 0.05, 0.05, 0.05, 0.05])
 SPEED_OF_LIGHT = 299_792_458.0

@@ -25,12 +25,12 @@ LOSSES = (None, "huber", "cauchy")
 @dataclass(frozen=True)
 class CalibrationOptions:
     """``depth_bias``: 'auto' (the offset, and scale and tilt where the data call for them),
-    'none', or terms from 'offset', 'scale', 'tilt' joined by '+'. ``distortion``: 'auto' (the
+    'none', or terms from 'offset', 'scale', 'tilt', 'wiggle' joined by '+'. ``distortion``: 'auto' (the
     plumb_bob terms the data call for) or a preset of ``DISTORTION_TERMS``. ``plane_squares``:
     'auto' (the whole board unless the black squares read apart from the white), 'white' (the
     paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'. ``modulation_hz``: the camera's
-    modulation frequency, which sets the period of its wiggling error; given, 'auto' also
-    weighs a wiggling term (see depth_bias), which cannot be estimated without it."""
+    modulation frequency, which sets the period of its wiggling error; given, 'auto' always
+    estimates a wiggling term (see depth_bias), which cannot be estimated without it."""
 
     method: str = "depth"
     depth_convention: str = "z"
