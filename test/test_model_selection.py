@@ -41,19 +41,22 @@ def test_the_distortion_terms_the_lens_has(lens, expected):
     assert res.K[0, 0] == pytest.approx(F, abs=3 * res.std["fx"] + 0.05)
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3, 4, 6, pytest.param(5, marks=pytest.mark.xfail(
-    strict=True, reason="known: the score test at the distortion-free fit misses k1 here and the "
-    "result is trusted 2.8 % off (11 sigma); see the closing note of issue 12"))])
-def test_four_corners_three_images_with_a_real_lens(seed):
+def test_four_corners_three_images_with_a_real_lens():
     """Where OpenCV refuses (4 corners x 3 images) and a strong lens: the depth fixes the poses,
-    so distortion is observable; a trusted focal length is within 1 % (how often within its
-    stated sigmas is the benchmark's to count)."""
-    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 3, 4, seed)
-    res = calibrate(views, BOARD)
-    if res.ok:
-        assert abs(res.K[0, 0] / F - 1) < 0.01, (res.K[0, 0], res.std["fx"], res.model.reasons)
-    else:
-        assert any("poorly constrained" in r for r in res.verdict), res.verdict
+    so distortion is observable. Over twelve seeds a trusted focal length is within 2 % and
+    within 5 of its stated sigmas, and at most one lies beyond 3 (the score test alone, which
+    understates a term whose absence inflates the noise, trusted one 2.8 % off at 11 sigmas and
+    two beyond 3). An untrusted one says why."""
+    beyond = []
+    for seed in range(1, 13):
+        res = calibrate(_views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 3, 4, seed), BOARD)
+        if not res.ok:
+            assert any("poorly constrained" in r for r in res.verdict), res.verdict
+            continue
+        z = abs(res.K[0, 0] - F) / res.std["fx"]
+        assert abs(res.K[0, 0] / F - 1) < 0.02 and z < 5, (seed, res.K[0, 0], res.std["fx"], res.model.reasons)
+        beyond += [seed] if z > 3 else []
+    assert len(beyond) <= 1, beyond
 
 
 @pytest.mark.parametrize("depth_tilt, chosen", [((0.0, 0.0), False), ((0.02, -0.015), True)])

@@ -354,6 +354,19 @@ def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
     return float(-(N.g_glob @ dg + np.sum(N.g_pose * dp)))
 
 
+def deviance(views: list[Observations], fit: Fit) -> float:
+    """-2 log-likelihood, up to a constant, with each view's noise at the fit's own estimate
+    (profiled out): sum of 2 m ln(sigma) over each view's pixels and depth, m the measurements they
+    are worth. Two fits' deviances differ by the likelihood-ratio statistic of their models."""
+    total = 0.0
+    for v, spx, sd in zip(views, fit.sigma_px, fit.sigma_depth):
+        total += 2 * 2 * len(v.pixels) * np.log(spx)
+        n_d = np.isfinite(v.depth).sum()
+        if n_d:
+            total += 2 * min(n_d, v.depth_dof or np.inf) * np.log(sd)
+    return float(total)
+
+
 def n_observations(views: list[Observations]) -> float:
     """Independent measurements the views hold: two per corner, and each view's depth as many
     as it is worth (a plane's three), for an information criterion."""

@@ -82,9 +82,10 @@ class CalibrationOptions:
 
 @dataclass
 class Model:
-    """What the calibration settled on, and why. ``evidence``: for each term tested, the drop in
-    the whitened cost it would bring (the score test) against the information criterion's
-    price for its parameters; a term is taken when the drop exceeds the price.
+    """What the calibration settled on, and why. ``evidence``: for each term tested, its
+    likelihood-ratio statistic (the larger of the score test and the refit's drop in deviance)
+    against the information criterion's price for its parameters; a term is taken when the
+    statistic exceeds the price.
     ``dropped_corners``: board indices, per view, of corners a robust loss removed."""
 
     distortion: str = "none"
