@@ -60,9 +60,11 @@ def test_one_refusal_in_the_same_words_for_node_and_cli(name, value, reason, on_
 
 
 def test_the_wiggle_term_is_refused_without_the_modulation_frequency(capsys):
-    needs = "depth.bias: the wiggle term needs depth.modulation_mhz"
+    needs = "depth.bias 'offset+wiggle' with depth.modulation_mhz 0.0: the wiggle term needs the camera's modulation"
     assert refusal({"depth.bias": "offset+wiggle", "depth.modulation_mhz": 0.0}).startswith(needs)
     assert refusal({"depth.bias": "offset+wiggle", "depth.modulation_mhz": 20.0}) is None
+    # within the setting's range, but no ToF camera's: refused up front, not at the calibration
+    assert "modulation_hz must be a frequency" in refusal({"depth.bias": "auto", "depth.modulation_mhz": 0.01})
     with pytest.raises(SystemExit):
         cli.main(["bag", "x", "--size", "5x7", "--square", "0.03", "--output", "o", "--depth-bias", "offset+wiggle"])
     assert needs in capsys.readouterr().err

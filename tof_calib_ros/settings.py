@@ -24,8 +24,8 @@ LOSSES = ("none", "huber", "cauchy")
 
 
 def _depth_model(value: str) -> str | None:
-    try:
-        CalibrationOptions(depth_bias=value, modulation_hz=20e6)   # calibrate's own check of the terms
+    try:   # calibrate's own check of the terms; the modulation frequency is judged with it in ``refusal``
+        CalibrationOptions(depth_bias=value, modulation_hz=20e6)
     except CalibrationError as exc:
         return str(exc)
     return None
@@ -139,8 +139,12 @@ def refusal(values: Mapping[str, Any]) -> str | None:
         reason = f"no setting named {name!r}" if setting is None else setting.refusal(value)
         if reason:
             return reason
-    if "wiggle" in str(values.get("depth.bias", "")).split("+") and values.get("depth.modulation_mhz") == 0:
-        return "depth.bias: the wiggle term needs depth.modulation_mhz, which sets the wiggle's period"
+    bias, mhz = values.get("depth.bias"), values.get("depth.modulation_mhz")
+    if bias is not None and mhz is not None:
+        try:   # calibrate's own check of the two together
+            CalibrationOptions(depth_bias=bias, modulation_hz=mhz * 1e6 or None)
+        except CalibrationError as exc:
+            return f"depth.bias {bias!r} with depth.modulation_mhz {mhz}: {exc}"
     lo, hi = values.get("views.min"), values.get("views.max")
     if lo is not None and hi is not None and lo > hi:
         return f"views.min ({lo}) must not exceed views.max ({hi}): calibration could never start"

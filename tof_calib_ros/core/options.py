@@ -53,8 +53,8 @@ class CalibrationOptions:
         if self.depth_bias != "auto":
             terms = bias_model.parse(self.depth_bias)
             if self.modulation_hz is None and set(bias_model.TERMS["wiggle"]) & set(terms):
-                raise CalibrationError("the wiggle term needs the camera's modulation frequency (modulation_hz): "
-                                       "it sets the wiggle's period")
+                raise CalibrationError("the wiggle term needs the camera's modulation frequency "
+                                       "(modulation_hz), which sets the wiggle's period")
         if not isinstance(self.distortion, str) or self.distortion not in ("auto", *DISTORTION_TERMS):
             raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
                                    f"got {self.distortion!r}")
