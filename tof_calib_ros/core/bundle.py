@@ -42,13 +42,17 @@ class Observations:
     Denoised corner depths all come from one plane: ``depth_floor`` (the plane's own standard
     error) bounds their standard deviation from below, since their scatter about a smooth fit
     understates it, and ``depth_dof`` says how many independent measurements they are worth
-    (3 for a plane), so that a systematic depth error over a view is not counted once per corner."""
+    (3 for a plane), so that a systematic depth error over a view is not counted once per corner.
+    ``wiggle_curve`` (N, 2): how far each wiggle basis term at a corner lies off the plane
+    fitted to it over the view's samples. The plane keeps only the wiggle's planar part, so a
+    corner depth read off it is predicted with that part: the basis less this."""
 
     object_points: np.ndarray
     pixels: np.ndarray
     depth: np.ndarray
     depth_floor: float = 0.0
     depth_dof: float | None = None
+    wiggle_curve: np.ndarray | None = None
 
 
 @dataclass
@@ -108,6 +112,8 @@ class Problem:
         self.points = np.concatenate([v.object_points for v in views])
         self.pixels = np.concatenate([v.pixels for v in views])
         self.depth = np.concatenate([v.depth for v in views])
+        self.wiggle_curve = np.concatenate([np.zeros((len(v.pixels), 2)) if v.wiggle_curve is None
+                                            else v.wiggle_curve for v in views])
         self.view = np.concatenate([np.full(len(v.pixels), j) for j, v in enumerate(views)])
         w = np.sqrt(np.concatenate(weights)) if weights else np.ones(len(self.view))
         self.has_depth = np.isfinite(self.depth)
@@ -143,7 +149,8 @@ class Problem:
         pr = project(X, state.intrinsics, jac)
         d, dd = depth_of(X, self.convention)
         dpix = pr.pixels - self.pixels
-        ddep = depth_bias.measured(state.bias, d, X, self.wiggle_period) - self.depth
+        ddep = depth_bias.measured(state.bias, d, X, self.wiggle_period) - self.depth \
+            - self.wiggle_curve @ state.bias[depth_bias.TERMS["wiggle"]]
         if not jac:
             return dpix, ddep, None, None
         n = len(X)
@@ -155,7 +162,7 @@ class Problem:
         jd = np.zeros((n, N_GLOBAL + 6))
         r = np.linalg.norm(X, axis=1)
         jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack(
-            [np.ones(n), d, X[:, 0], X[:, 1], depth_bias.wiggle_basis(self.wiggle_period, d, r)])
+            [np.ones(n), d, X[:, 0], X[:, 1], depth_bias.wiggle_basis(self.wiggle_period, d, r) - self.wiggle_curve])
         grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
         if self.wiggle_period is not None:   # the wiggle f(r) d / r moves with the point too
             k = 2 * np.pi / self.wiggle_period
