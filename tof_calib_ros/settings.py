@@ -31,6 +31,11 @@ def _depth_model(value: str) -> str | None:
     return None
 
 
+def _modulation_hz(mhz: float) -> float | None:
+    """calibrate's ``modulation_hz`` from the setting in MHz (0: not known)."""
+    return mhz * 1e6 or None
+
+
 def _camera_name(value: str) -> str | None:
     if CAMERA_NAME.fullmatch(value):
         return None
@@ -142,7 +147,7 @@ def refusal(values: Mapping[str, Any]) -> str | None:
     bias, mhz = values.get("depth.bias"), values.get("depth.modulation_mhz")
     if bias is not None and mhz is not None:
         try:   # calibrate's own check of the two together
-            CalibrationOptions(depth_bias=bias, modulation_hz=mhz * 1e6 or None)
+            CalibrationOptions(depth_bias=bias, modulation_hz=_modulation_hz(mhz))
         except CalibrationError as exc:
             return f"depth.bias {bias!r} with depth.modulation_mhz {mhz}: {exc}"
     lo, hi = values.get("views.min"), values.get("views.max")
@@ -157,7 +162,7 @@ def calibration_options(values: Mapping[str, Any]) -> dict[str, Any]:
     return {"depth_convention": values["depth.convention"], "depth_bias": values["depth.bias"],
             "distortion": values["calibration.distortion"], "loss": None if loss == "none" else loss,
             "plane_squares": values["calibration.plane_squares"],
-            "modulation_hz": values["depth.modulation_mhz"] * 1e6 or None}
+            "modulation_hz": _modulation_hz(values["depth.modulation_mhz"])}
 
 
 def collector_config(values: Mapping[str, Any], stills: bool = False) -> CollectorConfig:

@@ -365,16 +365,17 @@ def deviance(views: list[Observations], fit: Fit) -> float:
     """-2 log-likelihood, up to a constant, with each view's noise at the fit's own estimate
     (profiled out): sum of 2 m ln(sigma) over each view's pixels and depth, m the measurements they
     are worth. Two fits' deviances differ by the likelihood-ratio statistic of their models."""
-    total = 0.0
-    for v, spx, sd in zip(views, fit.sigma_px, fit.sigma_depth):
-        total += 2 * 2 * len(v.pixels) * np.log(spx)
-        n_d = np.isfinite(v.depth).sum()
-        if n_d:
-            total += 2 * min(n_d, v.depth_dof or np.inf) * np.log(sd)
-    return float(total)
+    return float(sum(2 * 2 * len(v.pixels) * np.log(spx) + 2 * _depth_worth(v) * np.log(sd)
+                     for v, spx, sd in zip(views, fit.sigma_px, fit.sigma_depth)))
+
+
+def _depth_worth(view: Observations) -> float:
+    """How many independent measurements a view's corner depths are: as many as are valid, at
+    most what their plane is worth."""
+    return min(np.isfinite(view.depth).sum(), view.depth_dof or np.inf)
 
 
 def n_observations(views: list[Observations]) -> float:
     """Independent measurements the views hold: two per corner, and each view's depth as many
     as it is worth (a plane's three), for an information criterion."""
-    return float(sum(2 * len(v.pixels) + min(np.isfinite(v.depth).sum(), v.depth_dof or np.inf) for v in views))
+    return float(sum(2 * len(v.pixels) + _depth_worth(v) for v in views))

@@ -267,11 +267,10 @@ def _wiggle_curve(su: np.ndarray, flat: np.ndarray, corrected: np.ndarray, smp: 
     changes of depth: a millimetre of each term is fitted."""
     step = 1e-3
     basis = bias_model.wiggle_basis(period, corrected, corrected * np.linalg.norm(su, axis=1))
-    out = np.empty((len(d), 2))
+    out = bias_model.wiggle_basis(period, d, d * np.linalg.norm(u, axis=1))
     for k in range(2):
         moved, _ = corner_depth_along(fit_plane_to(su, flat + step * basis[:, k], smp.pixels, smp.black), u)
-        planar_part = (moved - d) / step
-        out[:, k] = bias_model.wiggle_basis(period, d, d * np.linalg.norm(u, axis=1))[:, k] - planar_part
+        out[:, k] -= (moved - d) / step   # the planar part
     return out
 
 
