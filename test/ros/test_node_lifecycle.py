@@ -47,3 +47,49 @@ def test_signals_end_both_nodes_cleanly_while_frames_flow(launch, spinner, sig, 
             assert code == 0, f"{proc.name} exited {code} on {sig.name} (attempt {attempt})\n" + logs(proc)
             assert "Traceback" not in out and "Error" not in out, out
         spinner.node.destroy_subscription(sub)
+
+
+STUCK_NODE = """
+import sys, threading
+from rclpy.node import Node
+from tof_calib_ros.ros import run as node_run
+
+class Stuck(Node):
+    def __init__(self):
+        super().__init__("stuck_node")
+        self.create_timer(0.1, lambda: None)   # as the package's nodes, something wakes the executor
+        self.get_logger().info("ready")
+
+    def destroy_node(self):
+        threading.Event().wait()   # a clean-up that never ends
+
+node_run.STOP_DEADLINE_S = 2.0
+sys.exit(node_run.run("stuck_node", Stuck, "a node whose clean-up hangs", {}, []))
+"""
+
+
+def test_a_stop_that_hangs_ends_by_force_and_says_where(ros, tmp_path):
+    """Whatever a thread is doing, a signal ends the node within its deadline, and what was still
+    running is printed (a node that kept running after SIGINT under load is why)."""
+    import sys
+    import time
+
+    env, _ = ros
+    log = tmp_path / "stuck.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([sys.executable, "-c", STUCK_NODE], stdout=out, stderr=subprocess.STDOUT, env=env)
+    try:
+        wait_until(lambda: "ready" in log.read_text() or proc.poll() is not None, START_TIMEOUT_S, "the node started")
+        assert proc.poll() is None, log.read_text()
+        proc.send_signal(signal.SIGINT)
+        sent = time.monotonic()
+        code = proc.wait(timeout=30)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    out = log.read_text()
+    assert code == 1, out
+    assert 2.0 <= took < 20, took
+    assert "stopping took more than 2 s: ended by force" in out, out
+    assert "in destroy_node" in out, out   # the stuck frame, for whoever reads the log

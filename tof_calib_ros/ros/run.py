@@ -4,14 +4,19 @@ rclpy's own signal handler shuts the context down the moment SIGINT arrives, whi
 may still be publishing: the simulated camera then ended every Ctrl-C with "RCLError: Failed to
 publish: publisher's context is invalid" and exit 1. Here SIGINT and SIGTERM stop the executor
 first (a KeyboardInterrupt in the spinning thread), running callbacks finish, the node is
-destroyed, and only then is the context shut down: exit 0, no traceback.
+destroyed, and only then is the context shut down: exit 0, no traceback. A signal during start-up
+ends the node the same way. Whatever a thread is doing, a stop ends the process within
+``STOP_DEADLINE_S``: past it, the threads still running are printed and the process exits 1.
 
 ``Executor`` is the multi-threaded executor the calibration node needs on Jazzy (see its doc).
 """
 from __future__ import annotations
 
+import faulthandler
+import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -32,6 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..core.errors import CalibrationError
 
 STOP_TIMEOUT_S = 5.0   # callbacks still running when a signal comes get this long to finish
+STOP_DEADLINE_S = 15.0  # the whole stop, threads joined at the interpreter's exit included
 
 
 class Executor(MultiThreadedExecutor):
@@ -84,22 +90,41 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
         return 0
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     signal.signal(signal.SIGTERM, signal.default_int_handler)   # SIGTERM ends the node as SIGINT does
+    node = spinner = None
     try:
-        node = make_node()
-    except (InvalidParameterValueException, InvalidParameterTypeException, CalibrationError) as exc:
-        rclpy.logging.get_logger(name).fatal(str(exc))
-        rclpy.try_shutdown()
-        return 1
-    spinner = executor()
-    spinner.add_node(node)
-    try:
+        try:
+            node = make_node()
+        except (InvalidParameterValueException, InvalidParameterTypeException, CalibrationError) as exc:
+            rclpy.logging.get_logger(name).fatal(str(exc))
+            return 1
+        spinner = executor()
+        spinner.add_node(node)
         spinner.spin()
     except KeyboardInterrupt:
         pass
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not cut the clean-up short
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        spinner.shutdown(timeout_sec=STOP_TIMEOUT_S)
-        node.destroy_node()
+        _deadline(name, STOP_DEADLINE_S)
+        if spinner is not None:
+            spinner.shutdown(timeout_sec=STOP_TIMEOUT_S)
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _deadline(name: str, seconds: float) -> None:
+    """End the process ``seconds`` from now unless it has ended: a thread stuck in a library (a
+    DDS participant's clean-up, a pool joined at the interpreter's exit) must not keep a node
+    alive after Ctrl-C, which under load it did for 30 s and more. What was still running is
+    printed, so that the cause can be found."""
+    def expire() -> None:
+        sys.stderr.write(f"[{name}] stopping took more than {seconds:g} s: ended by force; its threads were at\n")
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        sys.stderr.flush()
+        os._exit(1)
+
+    timer = threading.Timer(seconds, expire)
+    timer.daemon = True   # the interpreter's exit does not wait for it, and it outlives the threads it waits for
+    timer.start()
