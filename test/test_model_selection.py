@@ -72,8 +72,8 @@ def test_the_depth_tilt_is_taken_when_the_sensor_has_it(depth_tilt, chosen):
 def test_a_wiggling_depth_yields_to_the_corners():
     """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):
     over the distances seen its slope reads as a depth scale of a few percent, which the depth
-    alone puts in the focal length. Where the corners see that level, a scale term with it as
-    its prior takes it: over six seeds the focal error is a fraction of the offset-only model's."""
+    alone puts in the focal length. Where the corners see that level, a scale term takes it and
+    the corners fix it: over six seeds the focal error is a fraction of the offset-only model's."""
     ours, offset_only = [], []
     for seed in range(6):
         rng = np.random.default_rng(seed)
@@ -90,7 +90,8 @@ def test_a_wiggling_depth_yields_to_the_corners():
 def test_a_wiggling_depth_leaves_the_focal_length_within_its_sigmas():
     """General poses, 15 mm of wiggling, no modulation frequency: where the depth's level departs
     from the corners' by 2 standard errors, the scale term takes it. Over ten seeds the true fx
-    lies beyond 2 stated sigmas in at most 2 (at 5 standard errors, in 4, up to 7.8 sigmas off)."""
+    lies beyond 2 stated sigmas in at most 2 (measured: 1; at 5 standard errors with the level as
+    the scale's prior, 4, up to 7.8 sigmas off)."""
     beyond = []
     for seed in range(10):
         rng = np.random.default_rng(seed)

@@ -102,8 +102,7 @@ class Problem:
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
                  sigma_depth: np.ndarray, free_global, free_poses: bool = True,
-                 weights: list[np.ndarray] | None = None, prior_sigma: np.ndarray | None = None,
-                 wiggle_period: float | None = None):
+                 weights: list[np.ndarray] | None = None, wiggle_period: float | None = None):
         self.n_views = len(views)
         self.convention = convention
         self.wiggle_period = wiggle_period
@@ -120,7 +119,7 @@ class Problem:
         self.pixel_scale = w / np.asarray(sigma_px)[self.view]
         self.depth_scale = (w / np.asarray(sigma_depth)[self.view])[self.has_depth]
         self.priors = [i for i in self.free_global.tolist() if i >= N_INTRINSICS]
-        self.prior_sigma = depth_bias.PRIOR_SIGMA if prior_sigma is None else prior_sigma
+        self.prior_sigma = depth_bias.PRIOR_SIGMA
 
     @property
     def n_params(self) -> int:
@@ -303,19 +302,17 @@ def _robust_sigma(values: np.ndarray, floor: float) -> float:
 
 def solve(views: list[Observations], state: State, convention: str, free_global, free_poses: bool = True,
           rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
-          max_iter: int = 100, prior_sigma: np.ndarray | None = None, wiggle_period: float | None = None) -> Fit:
+          max_iter: int = 100, wiggle_period: float | None = None) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
     normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners.
-    ``prior_sigma``: the depth terms' priors, where not the defaults; ``wiggle_period``: the
-    depth's wiggling period (m), where the depth model has one."""
+    ``wiggle_period``: the depth's wiggling period (m), where the depth model has one."""
     n = len(views)
     sigma_px = np.ones(n)
     sigma_d = np.full(n, 0.01)
     weights = None
     total_it = 0
     for _ in range(rounds):
-        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, prior_sigma,
-                          wiggle_period)
+        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, wiggle_period)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
         dpix, ddep, _, _ = problem.raw(state)
@@ -336,8 +333,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
-    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, prior_sigma,
-                      wiggle_period)
+    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, wiggle_period)
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.

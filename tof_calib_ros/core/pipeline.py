@@ -51,9 +51,9 @@ MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image s
 BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
 MIN_BLACK_PIXELS = 30
 # A depth level this many standard errors from the corners' is a depth scale. Low, since what it
-# sets off is mild (a scale term whose prior is the level itself) and what a miss costs is not: in
-# general poses with 15 mm of wiggling, 5 standard errors left fx beyond 2 of its sigmas in 5 of 8
-# scenes, 2 in 2 of 8, with no scale taken in 16 scenes without wiggling.
+# sets off is mild (a scale term, which the corners fix) and what a miss costs is not: in general
+# poses with 15 mm of wiggling, 5 standard errors left fx beyond 2 of its sigmas in 4 of 10 seeds,
+# 2 in 1 of 10, with no scale taken in 16 scenes without wiggling.
 EXCESS_SIGMAS = 2.0
 CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
 MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are at one distance
@@ -549,15 +549,14 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     return fit.state, sorted(free), model
 
 
-def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say,
-           prior: np.ndarray | None = None):
+def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say):
     """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
     hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
     noiseless data exact). Returns the fit, the corner depths and the planes."""
     convention = options.depth_convention
     for round_ in range(MAX_OUTER_ROUNDS):
         before = np.r_[state.intrinsics, state.bias]
-        fit = bundle.solve(observations, state, convention, free, loss=options.loss, prior_sigma=prior,
+        fit = bundle.solve(observations, state, convention, free, loss=options.loss,
                            wiggle_period=options.wiggle_period)
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
@@ -604,7 +603,7 @@ def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[fl
 
 @dataclass
 class _DepthCheck:
-    scale_prior: float | None = None      # the depth scale's prior sigma, when the corners call for one
+    scale: bool = False                   # the corners call for a depth scale term
     reasons: list[str] = field(default_factory=list)
 
 
@@ -638,9 +637,10 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
     common to every ratio is a depth scale (the slope of a wiggling error over the distances
     seen, a square size or depth unit a little off) or a bias of the corners: within
     MAX_CORNER_DEPTH_DISAGREEMENT, and when the corners fix it better than the level itself
-    (their covariance and their spread over folds of the views), the depth gets a scale term
-    whose prior is that level, so the focal length rests on both by their merits; beyond it
-    the verdict refuses. A ratio that follows the distance (a ToF wiggling error) is reported."""
+    (their covariance and their spread over folds of the views), the depth gets a scale term,
+    which the corners fix, so that the focal length rests on the corners for its scale and on
+    the depth for the rest; beyond it the verdict refuses. A ratio that follows the distance (a
+    ToF wiggling error) is reported."""
     check = _DepthCheck()
     if corner_fit is None:
         return check
@@ -696,11 +696,11 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         # with one view): their spread over folds of the views, not only their covariance
         level_sigma = float(np.hypot(level_sigma, _corner_focal_spread(obj, prepared, image_size)))
     if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
-        check.scale_prior = abs(level)
+        check.scale = True
         check.reasons.append(
             f"the depth reads {level:+.2%} (±{level_sigma:.2%}) off the distances the corners give: a depth scale "
             "(the slope of a wiggling error, a square a little off) or a bias of the corners; a depth scale term "
-            f"with a prior of {abs(level):.2%} lets both weigh by their merits")
+            "lets the corners fix it")
     return check
 
 
@@ -813,12 +813,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     for why in check.reasons:
         model.reasons.append(why)
         say(why)
-    if check.scale_prior is not None:
+    if check.scale:
         free = sorted({*free, N_INTRINSICS + 1})
-        prior = bias_model.PRIOR_SIGMA.copy()
-        prior[1] = check.scale_prior
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
-        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say, prior)
+        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say)
     result = _result(options, model, board, image_size, fit, prepared, planes, rejected, notes, corner_fit)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
