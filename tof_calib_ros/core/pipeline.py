@@ -52,8 +52,9 @@ BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from
 MIN_BLACK_PIXELS = 30
 # A depth level this many standard errors from the corners' is a depth scale. Low, since what it
 # sets off is mild (a scale term, which the corners fix) and what a miss costs is not: in general
-# poses with 15 mm of wiggling, 5 standard errors left fx beyond 2 of its sigmas in 4 of 10 seeds,
-# 2 in 1 of 10, with no scale taken in 16 scenes without wiggling.
+# poses with 15 mm of wiggling, 5 standard errors (and the level as the scale's prior) left fx
+# beyond 2 of its sigmas in 4 of 10 seeds, 2 in 1 of 10; no scale was taken in 16 scenes without
+# wiggling.
 EXCESS_SIGMAS = 2.0
 CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
 MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are at one distance
