@@ -93,3 +93,24 @@ def test_a_stop_that_hangs_ends_by_force_and_says_where(ros, tmp_path):
     assert 2.0 <= took < 20, took
     assert "stopping took more than 2 s: ended by force" in out, out
     assert "in destroy_node" in out, out   # the stuck frame, for whoever reads the log
+
+
+def test_sigint_stops_a_node_started_with_sigint_ignored(ros, spinner, tmp_path):
+    """A background job of a script starts with SIGINT ignored, which Python keeps: the node must
+    still stop on it (launch stops nodes with SIGINT)."""
+    env, _ = ros
+    log = tmp_path / "sim.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([str(executable("tof_sim_node")), "--ros-args", "-r", "__ns:=/ignored"], stdout=out,
+                                stderr=subprocess.STDOUT, env=env,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        frames = []
+        spinner.node.create_subscription(Image, "/ignored/amplitude", frames.append, qos_profile_sensor_data)
+        wait_until(lambda: len(frames) >= 3 or proc.poll() is not None, START_TIMEOUT_S, "frames from the camera")
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert code == 0, log.read_text()

@@ -89,6 +89,9 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
         print(usage(name, doc, parameters))
         return 0
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # A process started in the background of a script inherits SIGINT ignored, and Python then
+    # leaves it so: such a node could not be stopped the way launch stops nodes.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, signal.default_int_handler)   # SIGTERM ends the node as SIGINT does
     node = spinner = None
     try:
