@@ -70,7 +70,7 @@ sys.exit(node_run.run("stuck_node", Stuck, "a node whose clean-up hangs", {}, []
 
 def test_a_stop_that_hangs_ends_by_force_and_says_where(ros, tmp_path):
     """Whatever a thread is doing, a signal ends the node within its deadline, and what was still
-    running is printed (a node that kept running after SIGINT under load is why)."""
+    running is printed."""
     import sys
     import time
 

@@ -119,7 +119,6 @@ class Problem:
         self.pixel_scale = w / np.asarray(sigma_px)[self.view]
         self.depth_scale = (w / np.asarray(sigma_depth)[self.view])[self.has_depth]
         self.priors = [i for i in self.free_global.tolist() if i >= N_INTRINSICS]
-        self.prior_sigma = depth_bias.PRIOR_SIGMA
 
     @property
     def n_params(self) -> int:
@@ -174,7 +173,7 @@ class Problem:
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
         """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
         dpix, ddep, jp, jd = self.raw(state, jac)
-        prior = np.array([state.bias[i - N_INTRINSICS] / self.prior_sigma[i - N_INTRINSICS]
+        prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
                           for i in self.priors])
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
                             ddep[self.has_depth] * self.depth_scale, prior])
@@ -188,7 +187,7 @@ class Problem:
         if self.priors:
             gp = np.zeros((len(self.priors), len(self.free_global)))
             for k, i in enumerate(self.priors):
-                gp[k, list(self.free_global).index(i)] = 1.0 / self.prior_sigma[i - N_INTRINSICS]
+                gp[k, list(self.free_global).index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
             g = np.vstack([g, gp])
             pose = np.vstack([pose, np.zeros((len(self.priors), 6))])
             view = np.concatenate([view, np.zeros(len(self.priors), dtype=int)])

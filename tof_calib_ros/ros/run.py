@@ -120,8 +120,7 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
 def _deadline(name: str, seconds: float) -> None:
     """End the process ``seconds`` from now unless it has ended: a thread stuck in a library (a
     DDS participant's clean-up, a pool joined at the interpreter's exit) must not keep a node
-    alive after Ctrl-C, which under load it did for 30 s and more. What was still running is
-    printed, so that the cause can be found."""
+    alive after Ctrl-C. What was still running is printed, so that the cause can be found."""
     def expire() -> None:
         sys.stderr.write(f"[{name}] stopping took more than {seconds:g} s: ended by force; its threads were at\n")
         faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
