@@ -258,3 +258,21 @@ def test_kept_views_hold_the_accurate_corners():
     # found in the region around the quick corners: as accurate as the whole image's, or more
     kept, whole = rms(col.views[0].corners), rms(detect_corners(frame.amplitude, BOARD))
     assert kept < 0.1 and kept <= 1.1 * whole, (kept, whole)
+
+
+@pytest.mark.parametrize("accepted", [True, False])
+def test_the_board_picture_rings_a_corner_under_the_reason_text(accepted):
+    """A board at the top of the frame: its corners' rings are drawn over the reason's dark band
+    (drawn under it, they were hidden and the picture looked as if the corner was not found)."""
+    from tof_calib_ros.collect.board_picture import KEPT, REFUSED, TEXT_BAND_PX, draw, enlarged, scale_for
+
+    amplitude = np.tile(np.linspace(100, 2000, 200), (200, 1)).astype(np.uint16)
+    corners = np.array([[60.0, 4.0], [120.0, 150.0]])
+    progress = {"views": 0, "axes": {name: {"progress": 0.0} for name in AXES}}
+    picture = draw(amplitude, collector.Outcome(accepted, "a long reason " * 8, corners=corners), progress)
+    colour = np.array(KEPT if accepted else REFUSED)
+    k = scale_for(200)
+    for x, y in np.rint(enlarged(corners, k)).astype(int):
+        ring = picture[y - k - 3:y + k + 4, x - k - 3:x + k + 4].astype(int)
+        assert (np.abs(ring - colour).max(axis=2) < 40).any(), (x, y)
+    assert enlarged(corners, k)[0, 1] < TEXT_BAND_PX   # the first corner does lie under the band

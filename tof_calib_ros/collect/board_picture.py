@@ -42,10 +42,10 @@ def draw(amplitude: np.ndarray, outcome: Outcome, progress: dict) -> np.ndarray:
     gray = cv2.resize(tone_map(amplitude), None, fx=k, fy=k, interpolation=cv2.INTER_NEAREST)
     frame = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     colour = KEPT if outcome.accepted else REFUSED
-    if outcome.corners is not None:
+    _text_lines(frame, outcome.reason, (255, 255, 255) if outcome.accepted or outcome.corners is None else colour)
+    if outcome.corners is not None:   # over the text's band: a board at the top of the frame keeps its rings
         for x, y in enlarged(outcome.corners, k):
             cv2.circle(frame, (int(round(x)), int(round(y))), max(3, k + 1), colour, 2, cv2.LINE_AA)
-    _text_lines(frame, outcome.reason, (255, 255, 255) if outcome.accepted or outcome.corners is None else colour)
     panel = np.zeros((frame.shape[0], PANEL_WIDTH, 3), np.uint8)
     y = 30
     cv2.putText(panel, f"views {progress['views']}", (10, y), cv2.FONT_HERSHEY_SIMPLEX, 0.7, TEXT, 2, cv2.LINE_AA)
