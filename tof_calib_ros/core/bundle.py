@@ -10,7 +10,7 @@ covariance for the reported uncertainties.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -333,14 +333,29 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
     problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, wiggle_period)
+    cov, cost = _covariance(problem, state, n, free_poses)
+    dpix, ddep, _, _ = problem.raw(state)
+    return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
+               problem.free_global, cost, total_it, problem_sigmas[0], problem_sigmas[1], weights,
+               wiggle_period)
+
+
+def _covariance(problem: Problem, state: State, n_views: int, free_poses: bool) -> tuple[np.ndarray, float]:
+    """The free global parameters' covariance at ``state``, and the whitened cost there."""
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.
-    cov = global_covariance(_normal(J, r, n), free_poses) * max((r @ r) / dof, 1.0)
-    dpix, ddep, _, _ = problem.raw(state)
-    return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
-               problem.free_global, float(r @ r), total_it, problem_sigmas[0], problem_sigmas[1], weights,
-               wiggle_period)
+    return global_covariance(_normal(J, r, n_views), free_poses) * max((r @ r) / dof, 1.0), float(r @ r)
+
+
+def widened(views: list[Observations], fit: Fit, convention: str, extra) -> Fit:
+    """The fit at the same estimate, with the uncertainty of the ``extra`` global parameters (which
+    stay at their values, within their priors) carried into the covariance: for a term the data
+    may hold but cannot fix, whose estimate would be its prior's guess."""
+    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, extra], True,
+                      fit.weights, wiggle_period=fit.wiggle_period)
+    cov, _ = _covariance(problem, fit.state, len(views), True)
+    return replace(fit, covariance=cov, free_global=problem.free_global)
 
 
 def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:

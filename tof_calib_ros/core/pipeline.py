@@ -59,6 +59,7 @@ EXCESS_SIGMAS = 2.0
 CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
 MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are at one distance
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
+BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0: the depth error is not planar in z
 
 
 @dataclass
@@ -553,7 +554,8 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
 def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say):
     """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
     hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
-    noiseless data exact). Returns the fit, the corner depths and the planes."""
+    noiseless data exact). Returns the fit, the corner depths, the planes and the observations
+    they make."""
     convention = options.depth_convention
     for round_ in range(MAX_OUTER_ROUNDS):
         before = np.r_[state.intrinsics, state.bias]
@@ -571,7 +573,7 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
         # from the second does a small move say the observations have stopped changing
         if round_ and np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
             break
-    return fit, depths, planes
+    return fit, depths, planes, observations
 
 
 def _one_distance(z: np.ndarray) -> bool:
@@ -600,6 +602,62 @@ def _distance_structure(r: np.ndarray, s: np.ndarray, z: np.ndarray) -> tuple[fl
         return None
     shape = full @ fits[1] - base @ fits[0]   # what the distance terms add to the offset's fit
     return float(np.sqrt(np.mean(shape ** 2))), float(f_stat)
+
+
+def _bowl(smp: DepthSamples, su: np.ndarray, flat: np.ndarray, convention: str) -> tuple[float, float] | None:
+    """A view's radial intercept: how far its white squares' depth curves off their plane the way
+    an error in the radial distance does (in z-depth, a bowl deeper towards the image's edges),
+    in metres, with its standard error. The errors the model takes (a z offset, a scale, a tilt)
+    are planar and leave none; a constant radial offset leaves itself; a depth error that
+    changes with the distance, ``w(r)``, leaves the intercept of its tangent, ``w - r dw/dr``,
+    and its slope ``dw/dr`` is a depth scale, which near frontal views cannot tell from the
+    focal length."""
+    white = ~smp.black
+    if np.sum(white) < MIN_BLACK_PIXELS:
+        return None
+    su, flat, pixels = su[white], flat[white], smp.pixels[white]
+    # a metre of the other convention's distance, in this one's terms
+    q = 1 / np.linalg.norm(su, axis=1) if convention == "z" else 1 / su[:, 2]
+    none_black = np.zeros(len(flat), dtype=bool)
+    d = 1 / (su @ fit_plane_to(su, flat, pixels, none_black).coef)
+    step = 1e-3
+    moved = 1 / (su @ fit_plane_to(su, d + step * q, pixels, none_black).coef)
+    shape = q - (moved - d) / step   # the part of a radial offset no plane takes
+    ss = float(shape @ shape)
+    if ss <= 1e-12 * len(q):
+        return None
+    e = flat - d
+    b = float(e @ shape) / ss
+    return b, float(np.sqrt(np.sum((e - b * shape) ** 2) / max(len(e) - 4, 1) / ss))
+
+
+def _radial_intercept(bowls: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """The views' common radial intercept and its standard error, their scatter about it
+    included (a real sensor's noise is correlated over the board, which a view's own error misses)."""
+    if len(bowls) < 2:
+        return None
+    b, se = np.array(bowls).T
+    w = 1 / se ** 2
+    mean = float(np.sum(w * b) / np.sum(w))
+    chi2 = float(np.sum(w * (b - mean) ** 2))
+    return mean, float(np.sqrt(max(1.0, chi2 / (len(b) - 1)) / np.sum(w)))
+
+
+def _bowl_check(samples: _PlaneSamples, fit: bundle.Fit, convention: str) -> str | None:
+    """Why the depth may hold a scale the model leaves out, where the views' depth bows off their
+    planes as an error in the radial distance does (``_bowl``); None where it does not."""
+    bias = fit.state.bias
+    bowls = [_bowl(smp, su, bias_model.true_depth(bias, smp.depth, su), convention)
+             for smp, su in zip(samples.samples, samples.directions(fit.state.intrinsics, convention))
+             if smp is not None]
+    intercept = _radial_intercept([b for b in bowls if b is not None])
+    if intercept is None or abs(intercept[0]) <= BOWL_SIGMAS * intercept[1]:
+        return None
+    return ("the board's depth bows off its plane as an error in the radial distance does "
+            f"({intercept[0] * 1e3:+.0f} ± {intercept[1] * 1e3:.0f} mm): a radial offset, or a depth error that "
+            "changes with the distance (ToF wiggling), whose slope is a depth scale the focal length cannot be told "
+            "from but by tilted views; the focal length's uncertainty includes it. Give the modulation frequency to "
+            "model a wiggle")
 
 
 @dataclass
@@ -808,7 +866,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     model.plane_squares = squares
     if squares_reason:
         model.reasons.append(squares_reason)
-    fit, depths, planes = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
+    fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
     check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
@@ -817,7 +875,15 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if check.scale:
         free = sorted({*free, N_INTRINSICS + 1})
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
-        fit, depths, planes = _joint(prepared, plane_samples, obj, observations, fit.state, free, options, say)
+        fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, fit.state, free,
+                                                   options, say)
+    bowl = _bowl_check(plane_samples, fit, convention) \
+        if options.depth_bias == "auto" and options.wiggle_period is None else None
+    if bowl is not None:
+        model.reasons.append(bowl)
+        say(bowl)
+        if N_INTRINSICS + 1 not in free:
+            fit = bundle.widened(observations, fit, convention, [N_INTRINSICS + 1])
     result = _result(options, model, board, image_size, fit, prepared, planes, rejected, notes, corner_fit)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
