@@ -156,7 +156,7 @@ def test_robust_losses_resist_a_misdetected_corner():
         v.corners = v.corners + rng.normal(0, 0.05, v.corners.shape)
     clean = calibrate(views, BOARD, distortion="plumb_bob")
     views[2].corners[10] += (12.0, -9.0)  # one corner fifteen pixels off
-    sigma = np.array([clean.std["fx"], clean.std["fy"]])
+    sigma = np.array([clean.noise_std["fx"], clean.noise_std["fy"]])   # the noise's, which the outlier defies
     pull = {loss: np.abs((np.diag(calibrate(views, BOARD, distortion="plumb_bob", loss=loss).K)[:2]
                           - np.diag(clean.K)[:2]) / sigma).max() for loss in (None, "huber", "cauchy")}
     assert pull[None] > 1.0  # plain least squares is dragged off by more than its own sigma

@@ -356,7 +356,8 @@ def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional
 
 
 def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
-            notes, corner_fit: bundle.Fit | None = None) -> CalibrationResult:
+            notes, corner_fit: bundle.Fit | None = None, noise_fit: bundle.Fit | None = None) -> CalibrationResult:
+    """``noise_fit``: the fit with the covariance its noise gives, where ``fit``'s was raised."""
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
@@ -367,7 +368,7 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
         corner_noise = noise_per_dof(corner_fit.pixel_residuals, len(corner_fit.free_global))
     return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
                              _std(fit), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
-                             board.square, corner_noise=corner_noise)
+                             board.square, corner_noise=corner_noise, noise_std=_std(noise_fit or fit))
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
@@ -884,7 +885,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         say(bowl)
         if N_INTRINSICS + 1 not in free:
             fit = bundle.widened(observations, fit, convention, [N_INTRINSICS + 1])
-    result = _result(options, model, board, image_size, fit, prepared, planes, rejected, notes, corner_fit)
+    stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
+    result = _result(options, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit, fit)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
             corner_fit.state.intrinsics, [v.corners for v in prepared], depths, obj, convention)

@@ -66,7 +66,7 @@ class CalibrationResult:
     K: np.ndarray
     D: np.ndarray
     depth_bias: np.ndarray        # [offset (m), scale, tilt_x, tilt_y, wiggle sin, cos (m)], see core.depth_bias
-    std: dict[str, float]
+    std: dict[str, float]         # stated: the noise's, raised to the views' jackknife spread where that is larger
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
@@ -76,6 +76,7 @@ class CalibrationResult:
     square: float = float("nan")   # m, the board's square size as given
     depth_square: float = float("nan")   # m, the square size the depth implies with the corners' focal length
     corner_noise: tuple[float, int] | None = None   # the corners-alone fit's pixel noise (px), its degrees of freedom
+    noise_std: dict[str, float] = field(default_factory=dict)   # what the corners' and depth's noise alone give
 
     @property
     def depth_offset(self) -> float:
@@ -119,7 +120,9 @@ class CalibrationResult:
         if self.corner_focal is not None:
             fx_c, fy_c, sx_c, sy_c = self.corner_focal
             for name, f, c, s in (("fx", self.K[0, 0], fx_c, sx_c), ("fy", self.K[1, 1], fy_c, sy_c)):
-                apart = np.hypot(s, self.std.get(name, 0.0))
+                # at the noise's uncertainty: a wrong square tears the views apart, and the
+                # jackknife spread it makes would hide its cause
+                apart = np.hypot(s, self.noise_std.get(name, self.std.get(name, 0.0)))
                 if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
                     reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
                                    f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
@@ -174,6 +177,7 @@ class CalibrationResult:
             "distortion_coefficients": self.D.tolist(),
             "depth_bias": dict(zip(NAMES, map(float, self.depth_bias))),
             "std": dict(self.std),
+            "std_from_noise": dict(self.noise_std),
             "pixel_rms": self.pixel_rms,
             "depth_rms_m": self.depth_rms,
             "verdict": {"ok": self.ok, "reasons": self.verdict},
