@@ -40,6 +40,8 @@ def read_set(out: Path, through_links: bool = True) -> tuple[float, int]:
     fx = read_camera_yaml(gen / "calibration.yaml").K[0, 0]
     doc = json.loads((gen / "calibration.json").read_text())
     n = len(list((gen / "views").glob("*_ir.png")))
+    if not gen.is_dir():   # dropped while read (a reader two switches behind): no set to judge
+        raise FileNotFoundError(gen)
     assert doc["camera_matrix"][0][0] == fx and doc["n_views"] == n, f"a mixed set in {gen}"
     if through_links:   # the fixed names a driver opens lead to the same set (no writer running)
         assert read_camera_yaml(out / "calibration.yaml").K[0, 0] == fx

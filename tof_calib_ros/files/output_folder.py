@@ -89,7 +89,7 @@ def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence
             previous = _current(out)
             _point(out / CURRENT, f"{GENERATIONS}/{name}", token)
             _link_members(out, token)
-            _collect(out, keep={name, previous})
+            _collect(out, keep={name, previous}, token=token)
     except OSError as exc:
         raise CalibrationFileError(f"cannot write the calibration into {out}: {exc.strerror or exc}") from exc
     return out / "calibration.yaml"
@@ -169,16 +169,20 @@ def _adopt_legacy(out: Path, token: str) -> None:
         _point(path, f"{CURRENT}/{member}", token)
 
 
-def _collect(out: Path, keep: set[str | None]) -> None:
+def _collect(out: Path, keep: set[str | None], token: str) -> None:
     """Remove generations other than ``keep``, and what dead writers left: staging folders,
-    half-made links, the views an earlier version was swapping (``.views.new.<pid>...``)."""
+    half-made links, the views an earlier version was swapping (``.views.new.<pid>...``).
+    A generation goes by ``_drop``: a reader still in it then finds it gone, never half deleted."""
     for path in (out / GENERATIONS).iterdir():
         if path.name.startswith(_STAGING):
             if _alive_writer(path.name[len(_STAGING):]):
                 continue
         elif path.name in keep:
             continue
-        shutil.rmtree(path, ignore_errors=True)
+        if path.name.startswith("."):   # a staging folder, or one dropped before
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            _drop(path, token)
     for path in out.iterdir():
         left = _LEFTOVER.fullmatch(path.name)
         if left and not _alive_writer(left.group(1)):
