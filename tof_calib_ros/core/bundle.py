@@ -350,6 +350,19 @@ def _covariance(problem: Problem, state: State, n_views: int, free_poses: bool) 
     return global_covariance(_normal(J, r, n_views), free_poses) * max((r @ r) / dof, 1.0), float(r @ r)
 
 
+def jackknife_folds(n: int, folds: int) -> list[np.ndarray]:
+    """The views each of ``min(folds, n)`` refits keeps: fold k leaves out every m-th view from the k-th."""
+    m = min(folds, n)
+    return [np.setdiff1d(np.arange(n), np.arange(k, n, m)) for k in range(m)]
+
+
+def jackknife_spread(estimates: np.ndarray) -> np.ndarray:
+    """The grouped jackknife's standard deviation of the whole set's estimate, from the refits'
+    estimates (one row each)."""
+    m = len(estimates)
+    return np.sqrt((m - 1) / m * np.sum((estimates - estimates.mean(0)) ** 2, axis=0))
+
+
 def jackknifed(views: list[Observations], fit: Fit, convention: str, folds: int, estimated,
                loss: str | None = None) -> Fit:
     """The fit at the same estimate, each ``estimated`` global parameter's uncertainty raised to
@@ -357,18 +370,16 @@ def jackknifed(views: list[Observations], fit: Fit, convention: str, folds: int,
     of the views, so that an error of each view's own (a real sensor's depth at that view's
     distance and tilt) counts, which the covariance, built on errors independent between
     corners, does not see (few real views' fx came out 2-5 of their sigmas apart)."""
-    n = len(views)
-    m = min(folds, n)
+    kept = jackknife_folds(len(views), folds)
+    m = len(kept)
     if m < 3:
         return fit
     estimates = []
-    for k in range(m):
-        keep = np.setdiff1d(np.arange(n), np.arange(k, n, m))
+    for keep in kept:
         state = State(fit.state.intrinsics.copy(), fit.state.bias.copy(), fit.state.poses[keep].copy())
         sub = solve([views[i] for i in keep], state, convention, estimated, loss=loss, wiggle_period=fit.wiggle_period)
         estimates.append(np.r_[sub.state.intrinsics, sub.state.bias])
-    est = np.array(estimates)[:, fit.free_global]
-    spread = np.sqrt((m - 1) / m * np.sum((est - est.mean(0)) ** 2, axis=0))
+    spread = jackknife_spread(np.array(estimates)[:, fit.free_global])
     std = np.sqrt(np.maximum(np.diag(fit.covariance), 1e-300))
     # raised only where the spread exceeds what the covariance predicts for it (chi-square with
     # m - 1 degrees, at JACKKNIFE_P): on views whose errors are the model's, it would only add noise

@@ -671,19 +671,15 @@ def _corner_focal_spread(obj: list[np.ndarray], prepared: list[_Prepared], image
                          folds: int = CORNER_FOLDS) -> float:
     """The corners-alone focal length's jackknife spread over ``folds`` groups of the views,
     relative (inf where a fold cannot be calibrated)."""
-    n = len(prepared)
-    groups = [np.arange(n)[k::min(folds, n)] for k in range(min(folds, n))]
     fx = []
-    for g in groups:
-        keep = np.setdiff1d(np.arange(n), g)
+    for keep in bundle.jackknife_folds(len(prepared), folds):
         try:
             fx.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
                                        image_size).intrinsics[0])
         except CalibrationError:
             return float("inf")
     fx = np.array(fx)
-    m = len(fx)
-    return float(np.sqrt((m - 1) / m * np.sum((fx - fx.mean()) ** 2)) / fx.mean())
+    return float(bundle.jackknife_spread(fx) / fx.mean())
 
 
 def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
