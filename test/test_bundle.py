@@ -4,6 +4,7 @@ import pytest
 
 from tof_calib_ros import Board
 from tof_calib_ros.core import bundle, depth_bias
+from tof_calib_ros.core.camera import N_INTRINSICS, project, transform_views
 
 
 @pytest.mark.parametrize("convention", ["z", "radial"])
@@ -48,3 +49,30 @@ def test_the_depth_model_inverts_with_a_wiggle(convention):
     reported = depth_bias.measured(bias, depth, u * depth[:, None], period=1.87)
     assert np.ptp(reported - depth_bias.measured(bias, depth, u * depth[:, None])) > 0.01   # the wiggle is there
     np.testing.assert_allclose(depth_bias.true_depth(bias, reported, u, period=1.87), depth, atol=1e-7)
+
+
+def test_a_depth_scale_left_out_is_carried_into_the_focal_length_it_moves():
+    """A depth scale the model leaves out moves the depth-aided fx by about as much (the fit
+    trusts the depth's scale), whatever the tilts. The fit's own uncertainty cannot see it, nor the data's
+    with the scale free (it is about the truth, not the fit); widened with the scale's variance
+    at the scale's square, fx's stated uncertainty covers the move."""
+    rng = np.random.default_rng(1)
+    board = Board(6, 5, 0.05)
+    obj = board.object_points()
+    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    poses = np.array([[*rng.normal(0, 0.3, 3), -0.12, -0.1, z] for z in (0.8, 1.0, 1.2, 1.4)])
+    scale = 0.03
+    views = []
+    for pose in poses:
+        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
+        views.append(bundle.Observations(obj, project(X, truth).pixels + rng.normal(0, 0.05, (len(obj), 2)),
+                                         (1 + scale) * X[:, 2] + rng.normal(0, 0.002, len(obj))))
+    fit = bundle.solve(views, bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy()), "z",
+                       [0, 1, 2, 3, N_INTRINSICS])
+    moved = fit.state.intrinsics[0] - truth[0]
+    assert abs(moved) > 0.5 * scale * truth[0] and abs(moved) > 10 * fit.covariance[0, 0] ** 0.5
+    free = bundle.widened(views, fit, "z", N_INTRINSICS + 1)   # the scale's variance from the data alone
+    wide = bundle.widened(views, fit, "z", N_INTRINSICS + 1, scale ** 2)
+    assert wide.covariance[-1, -1] == pytest.approx(max(scale ** 2, free.covariance[-1, -1]))
+    # the data alone fix the scale to 0.9 %, about the truth: the fit at scale 0 lies beyond that
+    assert free.covariance[0, 0] ** 0.5 < abs(moved) / 2 < wide.covariance[0, 0] ** 0.5 < 2 * scale * truth[0]

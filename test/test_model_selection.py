@@ -107,12 +107,14 @@ def test_a_wiggling_depth_leaves_the_focal_length_within_its_sigmas():
 def test_a_near_frontal_wiggle_whose_bowl_shows_is_not_trusted():
     """Near frontal without the modulation frequency, a wiggle's slope is a depth scale the views
     cannot tell from the focal length; its bow across the board (an error in the radial distance)
-    shows. Where it shows, fx's uncertainty carries a depth scale and the verdict refuses, asking
-    for tilted views. Over ten seeds the offset-only model trusted 9, 0.4-4.8 % off at 3.5-59
-    sigmas; now 3 (1.4-2.2 %: their bow lies within 3 of its standard errors). Without a wiggle no
-    bow is seen, and every result is trusted and within 2 sigmas."""
+    shows, pooled over the views or view by view (the wiggle's differs with the distance, and may
+    pool to nothing). Where it shows, fx's uncertainty carries a depth scale, as large as the
+    corners say the depth's is where they say so, and the verdict refuses, asking for tilted
+    views. Over ten seeds the offset-only model trusted 9, 0.4-4.8 % off at 3.5-59 sigmas; the
+    pooled bow alone, 2 (18 and 13 sigmas: their bows pooled within 3 standard errors); now none.
+    Without a wiggle no bow is seen, and every result is trusted and within 2 sigmas."""
     lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
-    trusted_wrong = []
+    trusted_wrong, bowed_within = [], []
     for seed in range(10):
         rng = np.random.default_rng(seed)
         for amplitude in (0.015, 0.0):
@@ -126,7 +128,9 @@ def test_a_near_frontal_wiggle_whose_bowl_shows_is_not_trusted():
             else:
                 assert not (bowed and res.ok), (seed, res.verdict)
                 trusted_wrong += [seed] if res.ok and z > 2 else []
-    assert len(trusted_wrong) <= 4, trusted_wrong
+                bowed_within += [seed] if bowed and z < 2 else []
+    assert len(trusted_wrong) <= 1, trusted_wrong
+    assert len(bowed_within) >= 4, bowed_within   # measured 5 of the 9 bowed; 1 of 7 before the corners had a say
 
 
 @pytest.mark.parametrize("amplitude", [0.015, 0.0])

@@ -388,13 +388,18 @@ def jackknifed(views: list[Observations], fit: Fit, convention: str, folds: int,
     return replace(fit, covariance=fit.covariance * np.outer(gain, gain))
 
 
-def widened(views: list[Observations], fit: Fit, convention: str, extra) -> Fit:
-    """The fit at the same estimate, with the uncertainty of the ``extra`` global parameters (which
-    stay at their values, within their priors) carried into the covariance: for a term the data
-    may hold but cannot fix, whose estimate would be its prior's guess."""
-    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, extra], True,
+def widened(views: list[Observations], fit: Fit, convention: str, term: int, variance: float = 0.0) -> Fit:
+    """The fit at the same estimate, with the uncertainty of a ``term`` it leaves out (at its value,
+    within its prior) carried into the covariance, and that term's variance at least ``variance``
+    (what other evidence leaves of it), along the way the estimate would move with it: for a term
+    the data may hold but cannot fix."""
+    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, term], True,
                       fit.weights, wiggle_period=fit.wiggle_period)
     cov, _ = _covariance(problem, fit.state, len(views), True)
+    k = len(problem.free_global) - 1
+    if variance > cov[k, k] > 0:
+        along = cov[:, k] / cov[k, k]
+        cov = cov + (variance - cov[k, k]) * np.outer(along, along)
     return replace(fit, covariance=cov, free_global=problem.free_global)
 
 

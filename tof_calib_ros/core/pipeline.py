@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.stats import chi2 as scipy_chi2
 from scipy.stats import f as scipy_f
+from scipy.stats import norm as scipy_norm
 from threadpoolctl import threadpool_limits
 
 from . import bundle
@@ -59,7 +61,8 @@ EXCESS_SIGMAS = 2.0
 CORNER_FOLDS = 5  # folds of the views for the corners' own focal-length spread
 MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are at one distance
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
-BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0: the depth error is not planar in z
+BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0 (pooled, or view by view at the same
+#                   false-alarm rate): the depth error is not planar in z
 
 
 @dataclass
@@ -357,7 +360,8 @@ def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional
 
 def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
             notes, corner_fit: bundle.Fit | None = None, noise_fit: bundle.Fit | None = None) -> CalibrationResult:
-    """``noise_fit``: the fit with the covariance its noise gives, where ``fit``'s was raised."""
+    """``noise_fit``: the fit with the covariance its noise gives, where ``fit``'s was raised (by a
+    doubt on the depth's scale, by the views' jackknife)."""
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
@@ -632,38 +636,53 @@ def _bowl(smp: DepthSamples, su: np.ndarray, flat: np.ndarray, convention: str) 
     return b, float(np.sqrt(np.sum((e - b * shape) ** 2) / max(len(e) - 4, 1) / ss))
 
 
-def _radial_intercept(bowls: list[tuple[float, float]]) -> tuple[float, float] | None:
+def _radial_intercept(bowls: list[tuple[float, float]]) -> tuple[float, float, float] | None:
     """The views' common radial intercept and its standard error, their scatter about it
-    included (a real sensor's noise is correlated over the board, which a view's own error misses)."""
+    included (a real sensor's noise is correlated over the board, which a view's own error
+    misses), and the chance that every view's intercept is 0 (a wiggle's differs between views
+    at different distances, and may pool to nothing)."""
     if len(bowls) < 2:
         return None
     b, se = np.array(bowls).T
     w = 1 / se ** 2
     mean = float(np.sum(w * b) / np.sum(w))
     chi2 = float(np.sum(w * (b - mean) ** 2))
-    return mean, float(np.sqrt(max(1.0, chi2 / (len(b) - 1)) / np.sum(w)))
+    return (mean, float(np.sqrt(max(1.0, chi2 / (len(b) - 1)) / np.sum(w))),
+            float(scipy_chi2.sf(np.sum(w * b ** 2), len(b))))
 
 
-def _bowl_check(samples: _PlaneSamples, fit: bundle.Fit, convention: str) -> str | None:
+def _bowl_check(samples: _PlaneSamples, fit: bundle.Fit, convention: str, level: float) -> str | None:
     """Why the depth may hold a scale the model leaves out, where the views' depth bows off their
-    planes as an error in the radial distance does (``_bowl``); None where it does not."""
+    planes as an error in the radial distance does (``_bowl``); None where it does not. ``level``:
+    how far off the corners' distances the depth reads (``_DepthCheck``)."""
     bias = fit.state.bias
     bowls = [_bowl(smp, su, bias_model.true_depth(bias, smp.depth, su), convention)
              for smp, su in zip(samples.samples, samples.directions(fit.state.intrinsics, convention))
              if smp is not None]
-    intercept = _radial_intercept([b for b in bowls if b is not None])
-    if intercept is None or abs(intercept[0]) <= BOWL_SIGMAS * intercept[1]:
+    bowls = [b for b in bowls if b is not None]
+    intercept = _radial_intercept(bowls)
+    if intercept is None:
+        return None
+    mean, se, p_none = intercept
+    if abs(mean) > BOWL_SIGMAS * se:
+        seen = f"{mean * 1e3:+.0f} ± {se * 1e3:.0f} mm"
+    elif p_none < 2 * scipy_norm.sf(BOWL_SIGMAS):
+        each = [b for b, _ in bowls]
+        seen = f"from {min(each) * 1e3:+.0f} to {max(each) * 1e3:+.0f} mm between the views, p = {p_none:.1g} for none"
+    else:
         return None
     return ("the board's depth bows off its plane as an error in the radial distance does "
-            f"({intercept[0] * 1e3:+.0f} ± {intercept[1] * 1e3:.0f} mm): a radial offset, or a depth error that "
+            f"({seen}): a radial offset, or a depth error that "
             "changes with the distance (ToF wiggling), whose slope is a depth scale the focal length cannot be told "
-            "from but by tilted views; the focal length's uncertainty includes it. Give the modulation frequency to "
-            "model a wiggle")
+            "from but by tilted views; the focal length's uncertainty includes it"
+            + (f", as large a scale as the corners see the depth off theirs ({level:+.1%})" if level else "")
+            + ". Give the modulation frequency to model a wiggle")
 
 
 @dataclass
 class _DepthCheck:
     scale: bool = False                   # the corners call for a depth scale term
+    level: float = 0.0   # how far off the corners' distances the depth reads (relative), where beyond its noise
     reasons: list[str] = field(default_factory=list)
 
 
@@ -751,6 +770,7 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         # the corners' focal length can rest on a view or two (a real Kinect set moves it 2 %
         # with one view): their spread over folds of the views, not only their covariance
         level_sigma = float(np.hypot(level_sigma, _corner_focal_spread(obj, prepared, image_size)))
+    check.level = level if abs(level) > EXCESS_SIGMAS * level_sigma else 0.0
     if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         check.scale = True
         check.reasons.append(
@@ -874,15 +894,18 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
         fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, fit.state, free,
                                                    options, say)
-    bowl = _bowl_check(plane_samples, fit, convention) \
+    bowl = _bowl_check(plane_samples, fit, convention, check.level) \
         if options.depth_bias == "auto" and options.wiggle_period is None else None
+    noise_fit = fit
     if bowl is not None:
+        if N_INTRINSICS + 1 not in free:
+            # the data may fix the scale about the truth, not about this fit's; the corners see how far off it is
+            fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1, check.level ** 2)
         model.reasons.append(bowl)
         say(bowl)
-        if N_INTRINSICS + 1 not in free:
-            fit = bundle.widened(observations, fit, convention, [N_INTRINSICS + 1])
     stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
-    result = _result(options, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit, fit)
+    result = _result(options, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
+                     noise_fit)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
             corner_fit.state.intrinsics, [v.corners for v in prepared], depths, obj, convention)
