@@ -242,6 +242,7 @@ def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
     truth = sim.pmd_camera().K
     assert float(rows["fx"][3]) == pytest.approx(truth[0, 0], rel=0.01), run.stdout
     assert float(rows["fy"][3]) == pytest.approx(truth[1, 1], rel=0.01), run.stdout
+    assert "nan" not in run.stdout.split("error/std")[-1], run.stdout   # terms held at 0 say so
     assert "the driver now holds the calibration: True" in run.stdout
     assert np.allclose(read_camera_yaml(tmp_path / "driver_camera_info.yaml").K,
                        read_camera_yaml(tmp_path / "calibration.yaml").K)
