@@ -51,7 +51,7 @@ PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independ
 DEPTH_UNITS_RANGE = (1e-6, 1.0)  # metres per unit: micrometres to metres
 MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image say nothing across it
 BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
-MIN_BLACK_PIXELS = 30
+MIN_SQUARE_PIXELS = 30  # fewer pixels of one colour say nothing of its offset or its bow
 # A depth level this many standard errors from the corners' is a depth scale. Low, since what it
 # sets off is mild (a scale term, which the corners fix) and what a miss costs is not: in general
 # poses with 15 mm of wiggling, 5 standard errors (and the level as the scale's prior) left fx
@@ -468,11 +468,11 @@ def _black_reads_apart(offsets: list[tuple[float, float]]) -> tuple[bool, str]:
 def _black_offset(smp: DepthSamples, plane: Plane, intr: np.ndarray, convention: str) -> tuple[float, float] | None:
     """A view's median black-square depth off its white-square plane, with its standard error."""
     black = smp.subset(smp.black)
-    if len(black.depth) < MIN_BLACK_PIXELS:
+    if len(black.depth) < MIN_SQUARE_PIXELS:
         return None
     r = black.depth - corner_depth_along(plane, directions(black.pixels, intr, convention))[0]
     r = r[np.isfinite(r)]
-    if len(r) < MIN_BLACK_PIXELS:
+    if len(r) < MIN_SQUARE_PIXELS:
         return None
     mad = 1.4826 * np.median(np.abs(r - np.median(r)))
     return float(np.median(r)), float(1.2533 * mad / np.sqrt(len(r)))
@@ -618,7 +618,7 @@ def _bowl(smp: DepthSamples, su: np.ndarray, flat: np.ndarray, convention: str) 
     and its slope ``dw/dr`` is a depth scale, which near frontal views cannot tell from the
     focal length."""
     white = ~smp.black
-    if np.sum(white) < MIN_BLACK_PIXELS:
+    if np.sum(white) < MIN_SQUARE_PIXELS:
         return None
     su, flat, pixels = su[white], flat[white], smp.pixels[white]
     # a metre of the other convention's distance, in this one's terms
