@@ -396,10 +396,9 @@ def widened(views: list[Observations], fit: Fit, convention: str, term: int, var
     problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, term], True,
                       fit.weights, wiggle_period=fit.wiggle_period)
     cov, _ = _covariance(problem, fit.state, len(views), True)
-    k = len(problem.free_global) - 1
-    if variance > cov[k, k] > 0:
-        along = cov[:, k] / cov[k, k]
-        cov = cov + (variance - cov[k, k]) * np.outer(along, along)
+    if variance > cov[-1, -1] > 0:   # the term is the last free parameter
+        along = cov[:, -1] / cov[-1, -1]
+        cov = cov + (variance - cov[-1, -1]) * np.outer(along, along)
     return replace(fit, covariance=cov, free_global=problem.free_global)
 
 

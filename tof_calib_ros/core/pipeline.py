@@ -771,7 +771,7 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
         # with one view): their spread over folds of the views, not only their covariance
         level_sigma = float(np.hypot(level_sigma, _corner_focal_spread(obj, prepared, image_size)))
     check.level = level if abs(level) > EXCESS_SIGMAS * level_sigma else 0.0
-    if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
+    if check.level and abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         check.scale = True
         check.reasons.append(
             f"the depth reads {level:+.2%} (±{level_sigma:.2%}) off the distances the corners give: a depth scale "
