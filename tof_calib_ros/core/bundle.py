@@ -47,7 +47,9 @@ class Observations:
     (3 for a plane), so that a systematic depth error over a view is not counted once per corner.
     ``wiggle_curve`` (N, 2): how far each wiggle basis term at a corner lies off the plane
     fitted to it over the view's samples. The plane keeps only the wiggle's planar part, so a
-    corner depth read off it is predicted with that part: the basis less this."""
+    corner depth read off it is predicted with that part: the basis less this.
+    ``depth_inflation``: how many times its noise the depth's error is taken to be, where the
+    depth pulls the corners off their fit by an error the model does not explain."""
 
     object_points: np.ndarray
     pixels: np.ndarray
@@ -55,6 +57,7 @@ class Observations:
     depth_floor: float = 0.0
     depth_dof: float | None = None
     wiggle_curve: np.ndarray | None = None
+    depth_inflation: float = 1.0
 
 
 @dataclass
@@ -329,7 +332,8 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
             else:
                 new_px[j] = _robust_sigma(pix[j].ravel(), sigma_floor[0]) / np.sqrt(dof)
             worth = np.sqrt(n_d / views[j].depth_dof) if views[j].depth_dof and n_d else 1.0
-            new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor) * worth
+            new_d[j] = max(_robust_sigma(dep[j], sigma_floor[1]) / np.sqrt(dof), views[j].depth_floor) * worth \
+                * views[j].depth_inflation
         sigma_px, sigma_d = new_px, new_d
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]

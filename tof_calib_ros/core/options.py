@@ -86,7 +86,9 @@ class Model:
     likelihood-ratio statistic (the larger of the score test and the refit's drop in deviance)
     against the information criterion's price for its parameters; a term is taken when the
     statistic exceeds the price.
-    ``dropped_corners``: board indices, per view, of corners a robust loss removed."""
+    ``dropped_corners``: board indices, per view, of corners a robust loss removed.
+    ``depth_inflation``: how many times its noise the depth's error was taken to be, where the
+    depth at its full weight pulled the corners off their fit (1: its noise)."""
 
     distortion: str = "none"
     depth_bias: str = "none"
@@ -94,6 +96,7 @@ class Model:
     evidence: dict[str, dict[str, float]] = field(default_factory=dict)
     reasons: list[str] = field(default_factory=list)
     dropped_corners: dict[int, list[int]] = field(default_factory=dict)
+    depth_inflation: float = 1.0
 
     def to_dict(self) -> dict:
         out = asdict(self)

@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -39,7 +39,14 @@ from .planarize import (
     fit_samples,
     sample_depth,
 )
-from .result import INTRINSIC_NAMES, MAX_CORNER_DEPTH_DISAGREEMENT, CalibrationResult, ViewReport, noise_per_dof
+from .result import (
+    INTRINSIC_NAMES,
+    MAX_CORNER_DEPTH_DISAGREEMENT,
+    CalibrationResult,
+    ViewReport,
+    corners_pulled,
+    noise_per_dof,
+)
 from .traditional import Traditional, calibrate_opencv
 
 MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
@@ -51,6 +58,8 @@ PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independ
 DEPTH_UNITS_RANGE = (1e-6, 1.0)  # metres per unit: micrometres to metres
 MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image say nothing across it
 BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
+DEPTH_INFLATION_STEP = 2.0  # the depth's error is raised by this factor until the corners fit as well as alone
+MAX_DEPTH_INFLATION = 64.0  # and at most to this many times its noise: the depth is then all but silent
 MIN_SQUARE_PIXELS = 30  # fewer pixels of one colour say nothing of its offset or its bow
 # A depth level this many standard errors from the corners' is a depth scale. Low, since what it
 # sets off is mild (a scale term, which the corners fix) and what a miss costs is not: in general
@@ -283,8 +292,9 @@ def _wiggle_curve(su: np.ndarray, flat: np.ndarray, corrected: np.ndarray, smp: 
     return out
 
 
-def _observations(obj, views: list[_Prepared], depths, floors, curves) -> list[bundle.Observations]:
-    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, c)
+def _observations(obj, views: list[_Prepared], depths, floors, curves,
+                  inflation: float = 1.0) -> list[bundle.Observations]:
+    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, c, inflation)
             for o, v, d, f, c in zip(obj, views, depths, floors, curves)]
 
 
@@ -359,20 +369,21 @@ def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional
 
 
 def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
-            notes, corner_fit: bundle.Fit | None = None, noise_fit: bundle.Fit | None = None) -> CalibrationResult:
+            notes, corner_fit: bundle.Fit | None = None, noise_fit: bundle.Fit | None = None,
+            depth_focal: tuple[float, float, float, float] | None = None) -> CalibrationResult:
     """``noise_fit``: the fit with the covariance its noise gives, where ``fit``'s was raised (by a
-    doubt on the depth's scale, by the views' jackknife)."""
+    doubt on the depth's scale, by the views' jackknife). ``depth_focal``: see CalibrationResult."""
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
     corner_focal = corner_noise = None
     if corner_fit is not None:
-        std = _std(corner_fit)
-        corner_focal = (*map(float, corner_fit.state.intrinsics[:2]), std["fx"], std["fy"])
+        corner_focal = _focal(corner_fit)
         corner_noise = noise_per_dof(corner_fit.pixel_residuals, len(corner_fit.free_global))
     return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
                              _std(fit), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
-                             board.square, corner_noise=corner_noise, noise_std=_std(noise_fit or fit))
+                             board.square, corner_noise=corner_noise, noise_std=_std(noise_fit or fit),
+                             depth_focal=depth_focal)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
@@ -560,7 +571,8 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
     """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
     hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
     noiseless data exact). Returns the fit, the corner depths, the planes and the observations
-    they make."""
+    they make (at the depth's inflation the given ones have)."""
+    inflation = observations[0].depth_inflation
     convention = options.depth_convention
     for round_ in range(MAX_OUTER_ROUNDS):
         before = np.r_[state.intrinsics, state.bias]
@@ -571,7 +583,7 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
         depths, floors, planes, curves = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
                                                         convention, options.wiggle_period)
-        observations = _observations(obj, prepared, depths, floors, curves)
+        observations = _observations(obj, prepared, depths, floors, curves, inflation)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         # the first round starts where the model's choice left it, on the same observations: only
@@ -579,6 +591,30 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
         if round_ and np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
             break
     return fit, depths, planes, observations
+
+
+def _fit(prepared, plane_samples, obj, observations, state, scale: bool, options: CalibrationOptions, say,
+         model: Model | None = None, free: list[int] | None = None):
+    """The model the data call for (unless ``model`` and its ``free`` parameters are given) and the
+    joint fit with it, with a depth scale term where ``scale``. Returns the fit, its free
+    parameters, the model, and what ``_joint`` returns beside the fit."""
+    if model is None or free is None:
+        state, free, model = _select_model(observations, state, options.depth_convention, options, say)
+    if scale:
+        free = sorted({*free, N_INTRINSICS + 1})
+        model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
+    fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
+    return fit, free, model, depths, planes, observations
+
+
+def _focal(fit: bundle.Fit) -> tuple[float, float, float, float]:
+    """fx, fy and their standard deviations."""
+    std = _std(fit)
+    return float(fit.state.intrinsics[0]), float(fit.state.intrinsics[1]), std["fx"], std["fy"]
+
+
+def _pixel_noise(fit: bundle.Fit, model: Model) -> tuple[float, int]:
+    return noise_per_dof(fit.pixel_residuals, 4 + len(DISTORTION_TERMS.get(model.distortion, [])))
 
 
 def _one_distance(z: np.ndarray) -> bool:
@@ -878,22 +914,43 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
     observations = _observations(obj, prepared, depths, floors, curves)
-    state = bundle.solve(observations, state, convention, [], rounds=1).state
-    state, free, model = _select_model(observations, state, convention, options, say)
-    model.plane_squares = squares
-    if squares_reason:
-        model.reasons.append(squares_reason)
-    fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
+    start = bundle.solve(observations, state, convention, [], rounds=1).state
+    fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, start, False,
+                                                          options, say)
     check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
-        model.reasons.append(why)
         say(why)
     if check.scale:
-        free = sorted({*free, N_INTRINSICS + 1})
-        model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
-        fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, fit.state, free,
-                                                   options, say)
+        fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, fit.state,
+                                                              True, options, say, model, free)
+    depth_focal, full_depths = _focal(fit), depths   # what the depth says at its full weight
+    found = [squares_reason] * bool(squares_reason) + check.reasons
+    model = replace(model, plane_squares=squares, reasons=model.reasons + found)
+    # Where the depth pulls the corners off their fit, its error is one the model does not explain
+    # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone
+    corner_noise = None if corner_fit is None else noise_per_dof(corner_fit.pixel_residuals,
+                                                                 len(corner_fit.free_global))
+    full_weight = _pixel_noise(fit, model)
+    inflation = 1.0
+    # by the effect's size alone: 4 corners a view leave the corners-alone fit 2 degrees of freedom,
+    # which leave the F-test without power (a wiggle 17 times the corners' noise passed it, trusted
+    # 1.7 % off at 4 sigmas), and the depth yielding where it need not costs little
+    while corner_noise is not None and inflation < MAX_DEPTH_INFLATION and corners_pulled(
+            _pixel_noise(fit, model), corner_noise, tested=False):
+        inflation *= DEPTH_INFLATION_STEP
+        lighter = [replace(o, depth_inflation=inflation) for o in observations]
+        fit, free, chosen, depths, planes, observations = _fit(prepared, plane_samples, obj, lighter, start,
+                                                               check.scale, options, say)
+        model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
+    if inflation > 1:
+        model.depth_inflation = inflation
+        model.reasons.append(
+            f"the corners fit worse with the depth at its full weight than alone ({full_weight[0]:.3f} against "
+            f"{corner_noise[0]:.3f} px a degree of freedom; the depth says fx={depth_focal[0]:.1f} px): a depth "
+            f"error the model does not explain; its error is taken as {inflation:g} times its noise, where they fit "
+            f"about as well (at most {MAX_DEPTH_INFLATION:g})")
+        say(model.reasons[-1])
     bowl = _bowl_check(plane_samples, fit, convention, check.level) \
         if options.depth_bias == "auto" and options.wiggle_period is None else None
     noise_fit = fit
@@ -905,8 +962,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         say(bowl)
     stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
     result = _result(options, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
-                     noise_fit)
+                     noise_fit, depth_focal)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
-            corner_fit.state.intrinsics, [v.corners for v in prepared], depths, obj, convention)
+            corner_fit.state.intrinsics, [v.corners for v in prepared], full_depths, obj, convention)
     return result

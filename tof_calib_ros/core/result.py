@@ -34,6 +34,16 @@ MAX_PIXEL_NOISE_RATIO = 1.6
 MIN_PIXEL_EXCESS = 0.02      # px
 
 
+def corners_pulled(ours: tuple[float, int], alone: tuple[float, int], tested: bool = True) -> bool:
+    """Whether the corners fit worse with the depth than alone (pixel noise per degree of
+    freedom and those degrees, ``noise_per_dof``): by the ratio and the excess, and where
+    ``tested`` the F-test (which few degrees of freedom leave without power: 4 corners a view)."""
+    (noise, dof), (noise_alone, dof_alone) = ours, alone
+    return bool(dof > 0 and dof_alone > 0 and noise - noise_alone > MIN_PIXEL_EXCESS
+                and noise > MAX_PIXEL_NOISE_RATIO * noise_alone
+                and (not tested or (noise / noise_alone) ** 2 > f_distribution.ppf(1 - CORNER_FIT_P, dof, dof_alone)))
+
+
 def noise_per_dof(pixel_residuals: list[np.ndarray], n_intrinsics: int) -> tuple[float, int]:
     """The pixel noise per degree of freedom (px) of a fit's per-view residuals, and those
     degrees: each view's 6 pose parameters and the ``n_intrinsics`` estimated fit noise too."""
@@ -77,6 +87,9 @@ class CalibrationResult:
     depth_square: float = float("nan")   # m, the square size the depth implies with the corners' focal length
     corner_noise: tuple[float, int] | None = None   # the corners-alone fit's pixel noise (px), its degrees of freedom
     noise_std: dict[str, float] = field(default_factory=dict)   # what the corners' and depth's noise alone give
+    # fx, fy and what their noise gives them with the depth at its full weight: the focal length the
+    # depth says, where it pulled the corners off their fit and the result leans on the corners
+    depth_focal: tuple[float, float, float, float] | None = None
 
     @property
     def depth_offset(self) -> float:
@@ -117,23 +130,22 @@ class CalibrationResult:
             s = self.std.get(name, float("nan"))
             if not np.isfinite(s) or s > MAX_CENTER_REL_STD * size:
                 reasons.append(f"{name} is poorly constrained (std {s:.3g} px): tilt the board more between views")
-        if self.corner_focal is not None:
-            fx_c, fy_c, sx_c, sy_c = self.corner_focal
-            for name, f, c, s in (("fx", self.K[0, 0], fx_c, sx_c), ("fy", self.K[1, 1], fy_c, sy_c)):
+        if self.corner_focal is not None and self.depth_focal is not None:
+            for k, name in enumerate(("fx", "fy")):
+                f, c, s = self.depth_focal[k], self.corner_focal[k], self.corner_focal[k + 2]
                 # at the noise's uncertainty: a wrong square tears the views apart, and the
                 # jackknife spread it makes would hide its cause
-                apart = np.hypot(s, self.noise_std.get(name, self.std.get(name, 0.0)))
+                apart = np.hypot(s, self.depth_focal[k + 2])
                 if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
                     reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
                                    f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
                                    + self._squares_look(f / c))
-        if self.corner_noise is not None and self.method == "depth":
-            (ours, dof), (alone, dof_alone) = self.pixel_noise, self.corner_noise
-            if dof > 0 and dof_alone > 0 and ours - alone > MIN_PIXEL_EXCESS and ours > MAX_PIXEL_NOISE_RATIO * alone \
-                    and (ours / alone) ** 2 > f_distribution.ppf(1 - CORNER_FIT_P, dof, dof_alone):
-                reasons.append(f"the corners fit worse with the depth than alone ({ours:.3f} against {alone:.3f} px a "
-                               "degree of freedom): the lens model is too small for this lens, or the depth pulls the "
-                               "camera off what the corners say (a depth error the model does not explain)")
+        if self.corner_noise is not None and self.method == "depth" and corners_pulled(self.pixel_noise,
+                                                                                        self.corner_noise):
+            (ours, _), (alone, _) = self.pixel_noise, self.corner_noise
+            reasons.append(f"the corners fit worse with the depth than alone ({ours:.3f} against {alone:.3f} px a "
+                           "degree of freedom): the lens model is too small for this lens, or the depth pulls the "
+                           "camera off what the corners say (a depth error the model does not explain)")
         scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
         if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
             reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
@@ -186,6 +198,8 @@ class CalibrationResult:
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.corner_focal))),
             "corner_only_pixel_noise": None if self.corner_noise is None else dict(zip(
                 ("px", "dof"), self.corner_noise)),
+            "depth_full_weight_focal": None if self.depth_focal is None else dict(zip(
+                ("fx", "fy", "std_fx", "std_fy"), map(float, self.depth_focal))),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
