@@ -15,8 +15,16 @@ told the modulation frequency (``modulation_hz``, as a user who knows the camera
 of ours' stated standard deviations (``sigma_ok``), how often ours is trusted, and how often it is
 trusted while the truth lies beyond those two sigmas (``trusted_wrong``, the worst outcome).
 
-    python benchmarks/paper_table.py [--trials 20] [--regime near-frontal|general|both]
-                                     [--sensor NAME ...]
+On the first ``--bound-trials`` scenes of each cell, the Cramér-Rao bound (``sim.bound``) says
+what the views can support at best: ``corner_bound``, the least 3D error of any unbiased
+calibration from the corners alone with OpenCV's model (nine lens terms); ``depth_bound``, with
+every depth pixel too, for a method that knows which terms the sensor has (the lens's, the black
+squares' own offset, a wiggle of known period) and estimates them, and the depth's offset, which
+no ToF camera knows beforehand. OpenCV over ``depth_bound`` is about the largest ratio any method
+could show in that cell; ours over it, how much of what the views hold ours leaves on the table.
+
+    python benchmarks/paper_table.py [--trials 20] [--bound-trials 5]
+                                     [--regime near-frontal|general|both] [--sensor NAME ...]
 """
 from __future__ import annotations
 
@@ -26,12 +34,11 @@ import time
 from multiprocessing import Pool
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
-from tof_calib_ros.core.camera import points_from_depth, project, rays, transform
 from tof_calib_ros.core.depth_bias import wiggle_period
+from tof_calib_ros.sim.bound import Bound, Scene, mean_3d_error
 
 BOARD = Board(11, 11, 0.05)
 F_TRUE = 284.4
@@ -41,6 +48,8 @@ IMAGES = (3, 4, 5, 6, 7)
 CORNERS = (4, 9, 16, 25, 36)
 REGIMES = {"near-frontal": 5.0, "general": 40.0}
 DISTANCE = (0.9, 1.4)
+CORNER_NOISE = 0.01   # px
+NINE = list(range(9))
 MODULATION_HZ = 20e6
 WIGGLE = dict(wiggle_amplitude=0.015, wiggle_period=wiggle_period(MODULATION_HZ))
 TOF = dict(depth=0.01)                                # 10 mm on a white square at 1 m, sqrt(1/amplitude)
@@ -72,21 +81,25 @@ def subgrid(n: int) -> np.ndarray:
     return np.array([r * BOARD.cols + c for r in sel for c in sel])
 
 
-def mean_3d_error(result, poses, camera: np.ndarray) -> float:
-    """The paper's Eq. 12, in millimetres."""
-    obj = BOARD.object_points()
+def score(result, poses, camera: np.ndarray) -> float:
+    """The paper's mean 3D error (mm) of a calibration result."""
     params = np.r_[result.K[0, 0], result.K[1, 1], result.K[0, 2], result.K[1, 2], result.D]
-    errs = []
-    for view, (rvec, tvec) in zip(result.views, poses):
-        X, _ = transform(rvec, tvec, obj)
-        est = points_from_depth(rays(project(X, camera).pixels, params), X[:, 2], "z")
-        R = cv2.Rodrigues(view.rvec)[0]
-        errs.append(np.linalg.norm((est - view.tvec) @ R - obj, axis=1).mean())
-    return float(np.mean(errs) * 1e3)
+    return mean_3d_error(params, [(v.rvec, v.tvec) for v in result.views], poses,
+                         sim.SimCamera(camera, 200, 200), BOARD)
+
+
+def bounds(scene: Scene, seed: int) -> dict:
+    """The least 3D error (mm) any unbiased calibration makes on this scene: from the corners
+    alone with OpenCV's model, and with the depth knowing the sensor's terms but not its offset."""
+    b = Bound(scene)
+    lens = [k for k in NINE if k < 4 or scene.camera.params[k] != 0]
+    terms = ["offset"] + ["black"] * (scene.noise.dark_offset != 0) + ["wiggle"] * (scene.noise.wiggle_amplitude > 0)
+    rng = np.random.default_rng(seed)
+    return dict(corner_bound=b.expected_3d_error(NINE, None, rng), depth_bound=b.expected_3d_error(lens, terms, rng))
 
 
 def trial(args) -> dict:
-    sensor, regime, n_img, n_corn, seed = args
+    sensor, regime, n_img, n_corn, seed, with_bound = args
     params, noise, told = SENSORS[sensor]
     camera = sim.SimCamera(params, 200, 200)
     rng = np.random.default_rng(seed)
@@ -97,13 +110,15 @@ def trial(args) -> dict:
     views = []
     for rvec, tvec in poses:
         frame = sim.render(camera, BOARD, rvec, tvec, noise=sim.Noise(**noise), rng=rng)
-        views.append(View(frame.depth, frame.corners[ids] + rng.normal(0, 0.01, (len(ids), 2)), ids))
+        views.append(View(frame.depth, frame.corners[ids] + rng.normal(0, CORNER_NOISE, (len(ids), 2)), ids))
     out = {}
+    if with_bound:
+        out["bound"] = bounds(Scene(camera, BOARD, poses, ids, sim.Noise(**noise), CORNER_NOISE), seed)
     for name, kwargs in METHODS.items():
         t0 = time.perf_counter()
         try:
             res = calibrate(views, BOARD, **(kwargs if name == "traditional" else {**kwargs, **told}))
-            out[name] = dict(error_mm=mean_3d_error(res, poses, params), focal_rel=abs(res.K[0, 0] / F_TRUE - 1),
+            out[name] = dict(error_mm=score(res, poses, params), focal_rel=abs(res.K[0, 0] / F_TRUE - 1),
                              sigma_ok=bool(abs(res.K[0, 0] - F_TRUE) <= 2 * res.std["fx"]), trusted=res.ok,
                              seconds=time.perf_counter() - t0)
         except CalibrationError:
@@ -123,6 +138,7 @@ def _grid(rows: list[dict], key: str, fmt: str) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--bound-trials", type=int, default=5, help="scenes a cell whose Cramér-Rao bound is computed")
     ap.add_argument("--regime", choices=[*REGIMES, "both"], default="both")
     ap.add_argument("--sensor", choices=list(SENSORS), nargs="+", default=list(SENSORS))
     ap.add_argument("--jobs", type=int, default=2)
@@ -130,8 +146,8 @@ def main() -> None:
     args = ap.parse_args()
     regimes = list(REGIMES) if args.regime == "both" else [args.regime]
     cells = [(s, r, i, c) for s in args.sensor for r in regimes for c in CORNERS for i in IMAGES]
-    jobs = [(s, r, i, c, 100000 * list(SENSORS).index(s) + 1000 * k + 7 * i + c + 50000 * list(REGIMES).index(r))
-            for s, r, i, c in cells for k in range(args.trials)]
+    jobs = [(s, r, i, c, 100000 * list(SENSORS).index(s) + 1000 * k + 7 * i + c + 50000 * list(REGIMES).index(r),
+             k < args.bound_trials) for s, r, i, c in cells for k in range(args.trials)]
     t0 = time.time()
     with Pool(args.jobs) as pool:
         runs = pool.map(trial, jobs, chunksize=4)
@@ -152,6 +168,14 @@ def main() -> None:
         # the worst outcome: trusted, with a stated uncertainty that misses the truth
         row["ours_trusted_wrong"] = float(np.mean([g["ours"]["trusted"] and not g["ours"]["sigma_ok"] for g in got]))
         row["ratio_traditional_over_ours"] = row["traditional"] / row["ours"]
+        for b in ("corner_bound", "depth_bound"):
+            row[b] = float(np.median([g["bound"][b] for g in got if "bound" in g] or [np.nan]))
+        # on the scenes with a bound: the most any method could gain over OpenCV, and what ours leaves
+        bounded = [g for g in got if "bound" in g]
+        row["ratio_traditional_over_bound"] = float(np.median([g["traditional"]["error_mm"] / g["bound"]["depth_bound"]
+                                                               for g in bounded] or [np.nan]))
+        row["ours_over_bound"] = float(np.median([g["ours"]["error_mm"] / g["bound"]["depth_bound"]
+                                                  for g in bounded] or [np.nan]))
         rows.append(row)
     print(f"mean 3D error over all 121 corners, mm: median of {args.trials} trials a cell (a refusal counts as "
           f"inf); OpenCV and ours on its defaults on the same views; {time.time() - t0:.0f} s")
@@ -166,17 +190,29 @@ def main() -> None:
                     "ours_worse_cells": int(np.sum(ratios < 1)), "ours_failures": sum(x["ours_failures"] for x in sel),
                     "sigma_ok": float(np.mean([x["ours_sigma_ok"] for x in sel])),
                     "trusted": float(np.mean([x["ours_trusted"] for x in sel])),
-                    "trusted_wrong": float(np.mean([x["ours_trusted_wrong"] for x in sel]))}
+                    "trusted_wrong": float(np.mean([x["ours_trusted_wrong"] for x in sel])),
+                    "bound_ratio_min": float(np.min([x["ratio_traditional_over_bound"] for x in sel])),
+                    "bound_ratio_median": float(np.median([x["ratio_traditional_over_bound"] for x in sel])),
+                    "depth_bound_max_mm": float(np.max([x["depth_bound"] for x in sel])),
+                    "ours_over_bound_median": float(np.median([x["ours_over_bound"] for x in sel])),
+                    "ours_over_bound_max": float(np.max([x["ours_over_bound"] for x in sel]))}
             summary.append(line)
             print(f"\n{s}, {r}: OpenCV / ours from {line['ratio_min']:.1f} (median {line['ratio_median']:.1f}); "
                   f"ours at most {line['ours_max_mm']:.2f} mm (OpenCV {line['opencv_max_mm']:.2f}); worse than OpenCV "
                   f"in {line['ours_worse_cells']}/{len(sel)} cells; {line['ours_failures']} failures; true fx within "
                   f"2 stated sigmas in {line['sigma_ok']:.0%}; trusted {line['trusted']:.0%}, trusted with the truth "
                   f"beyond 2 stated sigmas {line['trusted_wrong']:.0%}")
+            print(f"  the bound: OpenCV / the least any depth-aided method can make from {line['bound_ratio_min']:.1f} "
+                  f"(median {line['bound_ratio_median']:.1f}), that least at most {line['depth_bound_max_mm']:.2f} mm; "
+                  f"ours / it {line['ours_over_bound_median']:.1f} in the median cell, "
+                  f"{line['ours_over_bound_max']:.1f} at worst")
             print("  OpenCV, mm:")
             print("\n".join(_grid(sel, "traditional", "8.3f")))
             print("  ours, mm:")
             print("\n".join(_grid(sel, "ours", "8.3f")))
+            for b, what in (("corner_bound", "from the corners alone"), ("depth_bound", "with the depth")):
+                print(f"  the bound {what}, mm:")
+                print("\n".join(_grid(sel, b, "8.3f")))
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps({"trials": args.trials, "summary": summary, "rows": rows}, indent=1))
     print(f"wrote {args.output}")
