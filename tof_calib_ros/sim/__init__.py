@@ -12,7 +12,8 @@ Pixel ``(u, v)`` is centred on image coordinate ``(u, v)``, as in OpenCV, so the
 The simulator package: this renderer (numpy and OpenCV, importing ``core`` only),
 ``sim.recording``, which films scenes into bags for the offline tool (importing ``files`` for
 the bag writer), and ``sim.bound``, the least error any calibration can make on a rendered scene
-(its Cramér-Rao bound), which the benchmarks measure methods against. The ROS driver that streams it is ``ros.sim_node``; nothing here imports rclpy.
+(its Cramér-Rao bound), which the benchmarks measure methods against. The ROS driver that
+streams it is ``ros.sim_node``; nothing here imports rclpy.
 """
 from __future__ import annotations
 
