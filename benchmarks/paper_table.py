@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from multiprocessing import Pool
 from pathlib import Path
@@ -149,8 +150,13 @@ def main() -> None:
     jobs = [(s, r, i, c, 100000 * list(SENSORS).index(s) + 1000 * k + 7 * i + c + 50000 * list(REGIMES).index(r),
              k < args.bound_trials) for s, r, i, c in cells for k in range(args.trials)]
     t0 = time.time()
+    runs = []
     with Pool(args.jobs) as pool:
-        runs = pool.map(trial, jobs, chunksize=4)
+        for run in pool.imap(trial, jobs, chunksize=4):
+            runs.append(run)
+            if len(runs) % 100 == 0 or len(runs) == len(jobs):   # an hour's run says where it is
+                left = (time.time() - t0) / len(runs) * (len(jobs) - len(runs))
+                print(f"  {len(runs)}/{len(jobs)} trials, about {left / 60:.0f} min left", file=sys.stderr, flush=True)
     rows = []
     for s, r, i, c in cells:
         got = [o for job, o in zip(jobs, runs) if job[:4] == (s, r, i, c)]
