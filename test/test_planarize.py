@@ -3,13 +3,16 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, CalibrationError, sim
+from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.planarize import (
     board_samples,
     corner_depth,
     fit_plane_to,
     fit_samples,
+    off_plane,
     planarize,
     sample_depth,
+    smoothed,
     square_pixels,
 )
 
@@ -144,3 +147,35 @@ def test_all_invalid_depth_is_a_clear_error(bad):
     depth = np.full_like(f.depth, bad)
     with pytest.raises(CalibrationError, match="valid depth pixels"):
         planarize(depth, f.corners, np.arange(BOARD.n_corners), BOARD, CAM.params, "z")
+
+
+def test_the_depth_off_its_plane_measures_a_curved_term_without_bias():
+    """A wiggle's curvature across near-frontal boards, about a millimetre against 10 mm noise a
+    pixel: what the depth off their planes says of the wiggle's two terms (one combination a
+    view, the distances telling them apart) is centred on the truth and spreads over noise draws
+    as its information says (measured: 1 % off the truth, spread 0.98-1.03 of the stated). With
+    the basis at each sample's noisy depth it was biased 10 times the wiggle; at the plane's, 5 %."""
+    rng = np.random.default_rng(3)
+    xs, ys = np.meshgrid(np.linspace(-0.3, 0.3, 60), np.linspace(-0.3, 0.3, 60))
+    u = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    period, w = depth_bias.wiggle_period(20e6), np.array([0.012, -0.009])
+    black = np.zeros(len(u), dtype=bool)
+    estimates, stds = [], []
+    for _ in range(200):
+        info, moment = np.zeros((2, 2)), np.zeros(2)
+        for distance in (0.9, 1.15, 1.4):
+            true = 1.0 / (u @ np.array([0.04, -0.03, 1 / distance]))   # tilted 2-3 degrees
+            reads = true + depth_bias.wiggle_basis(period, true, true * np.linalg.norm(u, axis=1)) @ w
+            depth = reads + rng.normal(0, 0.01, len(u))
+            plane = fit_plane_to(u, depth, u[:, :2], black)
+            # the basis at the depth without its noise, the wiggle taken out as the pipeline does
+            at = depth_bias.true_depth(np.r_[0, 0, 0, 0, w], smoothed(plane, u, depth), u, period)
+            basis = depth_bias.wiggle_basis(period, at, at * np.linalg.norm(u, axis=1))
+            i, m = off_plane(plane, u, depth, black, basis)
+            info, moment = info + i, moment + m
+        estimates.append(np.linalg.solve(info, moment))
+        stds.append(np.sqrt(np.diag(np.linalg.inv(info))))
+    estimates, std = np.array(estimates), np.mean(stds, axis=0)
+    assert np.all(std < 0.005), std                                  # three views pin the wiggle to a few mm
+    assert np.all(np.abs(estimates.mean(0) - w) < 3 * std / np.sqrt(len(estimates)) + 3e-4), (estimates.mean(0), w)
+    assert np.all(np.abs(estimates.std(0) / std - 1) < 0.15), (estimates.std(0), std)

@@ -248,6 +248,35 @@ def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray, 
     return Plane(coef, cov, sigma, pixels.astype(int), np.ones(len(depth), dtype=bool), len(depth))
 
 
+def off_plane(plane: Plane, directions: np.ndarray, depth: np.ndarray, black: np.ndarray,
+              basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the samples' depth off their fitted plane says of small depth terms (``basis`` (M, K),
+    each term's depth at the samples) that curve across the board: the information (K, K) and
+    the moment (K,) of the residuals' part the plane's three parameters cannot absorb, each
+    sample weighted by its colour's noise. The terms' estimate from them is information^-1 moment.
+    A plane keeps only a term's planar part; this is the rest, which near frontal is most of
+    what the depth says of a wiggle."""
+    s = directions @ plane.coef
+    r = depth - 1.0 / s
+    J = directions / s[:, None] ** 2
+    w = 1 / _colour_noise(r, black) ** 2
+    Jw = J * w[:, None]
+    off = basis - J @ np.linalg.solve(Jw.T @ J, Jw.T @ basis)
+    offw = off * w[:, None]
+    return offw.T @ off, offw.T @ r
+
+
+def smoothed(plane: Plane, directions: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """The samples' depth with their noise taken out and their curvature kept: the plane plus a
+    cubic over the rays fitted to what it leaves. A term placed by the depth it reads (a wiggle,
+    by the distance) is placed here: at each sample's own depth, the noise enters the term and
+    biases what is fitted with it; at the plane's, the curvature it leaves out misplaces it."""
+    fitted = 1.0 / (directions @ plane.coef)
+    x, y = directions[:, 0], directions[:, 1]
+    cubic = np.column_stack([x ** i * y ** j for i in range(4) for j in range(4 - i)])
+    return fitted + cubic @ np.linalg.lstsq(cubic, depth - fitted, rcond=None)[0]
+
+
 def corner_depth(plane: Plane, corners: np.ndarray, params: np.ndarray,
                  convention: str) -> tuple[np.ndarray, np.ndarray]:
     """Each corner's depth where its ray meets the plane, and that depth's standard error."""
