@@ -16,8 +16,13 @@ def test_jacobian_matches_finite_differences(convention, period):
     state = bundle.State(np.array([300.0, 290.0, 160.0, 120.0, -0.2, 0.05, 0.001, -0.001, 0.01]),
                          np.array([0.02, 0.01, 0.03, -0.02, 0.012, -0.008]),
                          np.array([[0.1, -0.2, 0.05, -0.1, -0.05, 0.8], [-0.2, 0.1, 0.0, -0.05, 0.0, 1.1]]))
-    curve = (lambda: None) if period is None else (lambda: rng.normal(0, 0.01, (12, 2)))   # a plane's share of it
-    views = [bundle.Observations(obj, rng.uniform(100, 200, (12, 2)), rng.uniform(0.7, 1.2, 12), wiggle_curve=curve())
+    def wiggle():   # a plane's share of it, and what the depth off the plane says of it
+        if period is None:
+            return None
+        a = rng.normal(0, 1e3, (3, 2))
+        return bundle.WiggleShape(rng.normal(0, 0.01, (12, 2)), a.T @ a, rng.normal(0, 10, 2))
+
+    views = [bundle.Observations(obj, rng.uniform(100, 200, (12, 2)), rng.uniform(0.7, 1.2, 12), wiggle=wiggle())
              for _ in range(2)]
     views[1].depth[3] = np.nan  # a corner without depth
     free = np.arange(13 if period is None else 15)   # the wiggle's terms with its period

@@ -19,6 +19,7 @@ from . import depth_bias
 from .camera import N_INTRINSICS, depth_of, project, transform_views
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
+WIGGLE = [N_INTRINSICS + k for k in depth_bias.TERMS["wiggle"]]
 RAYLEIGH_MEDIAN = np.sqrt(2 * np.log(2))  # median length of a 2-D Gaussian residual, in sigmas
 UNCONSTRAINED = 1e-12  # relative eigenvalue below which the views do not constrain a combination
 # The least noise the uncertainties assume (pixels, metres): what a corner detector and a
@@ -38,6 +39,20 @@ def loss_weights(loss: str, e: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class WiggleShape:
+    """A view's depth on the wiggle. ``curve`` (N, 2): how far each wiggle basis term at a corner
+    lies off the plane fitted to it over the view's samples. The plane keeps only the wiggle's
+    planar part, so a corner depth read off it is predicted with that part: the basis less this.
+    ``information`` (2, 2) and ``moment`` (2,): what the samples' depth off the plane says of the
+    wiggle's two terms (planarize.off_plane). Near frontal, a view's distance barely changes
+    and the planar part trades with the focal length; the curvature across the board does not."""
+
+    curve: np.ndarray
+    information: np.ndarray
+    moment: np.ndarray
+
+
+@dataclass
 class Observations:
     """One view's data: board points, measured pixels, measured depth (NaN where missing).
 
@@ -45,9 +60,7 @@ class Observations:
     error) bounds their standard deviation from below, since their scatter about a smooth fit
     understates it, and ``depth_dof`` says how many independent measurements they are worth
     (3 for a plane), so that a systematic depth error over a view is not counted once per corner.
-    ``wiggle_curve`` (N, 2): how far each wiggle basis term at a corner lies off the plane
-    fitted to it over the view's samples. The plane keeps only the wiggle's planar part, so a
-    corner depth read off it is predicted with that part: the basis less this.
+    ``wiggle``: where the depth model has a wiggle, what the view's depth says of it (WiggleShape).
     ``depth_inflation``: how many times its noise the depth's error is taken to be, where the
     depth pulls the corners off their fit by an error the model does not explain."""
 
@@ -56,7 +69,7 @@ class Observations:
     depth: np.ndarray
     depth_floor: float = 0.0
     depth_dof: float | None = None
-    wiggle_curve: np.ndarray | None = None
+    wiggle: WiggleShape | None = None
     depth_inflation: float = 1.0
 
 
@@ -116,8 +129,9 @@ class Problem:
         self.points = np.concatenate([v.object_points for v in views])
         self.pixels = np.concatenate([v.pixels for v in views])
         self.depth = np.concatenate([v.depth for v in views])
-        self.wiggle_curve = np.concatenate([np.zeros((len(v.pixels), 2)) if v.wiggle_curve is None
-                                            else v.wiggle_curve for v in views])
+        self.wiggle_curve = np.concatenate([np.zeros((len(v.pixels), 2)) if v.wiggle is None
+                                            else v.wiggle.curve for v in views])
+        self.wiggle_rows = _wiggle_rows(views) if set(WIGGLE) <= set(self.free_global.tolist()) else None
         self.view = np.concatenate([np.full(len(v.pixels), j) for j, v in enumerate(views)])
         w = np.sqrt(np.concatenate(weights)) if weights else np.ones(len(self.view))
         self.has_depth = np.isfinite(self.depth)
@@ -175,28 +189,46 @@ class Problem:
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
 
+    def _global_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened rows on the global parameters alone, A x - c: the depth terms' weak priors and
+        what the views' depth off their planes says of the wiggle."""
+        A = np.zeros((len(self.priors), N_GLOBAL))
+        A[np.arange(len(self.priors)), self.priors] = 1.0 / depth_bias.PRIOR_SIGMA[np.array(self.priors, dtype=int)
+                                                                                   - N_INTRINSICS]
+        c = np.zeros(len(self.priors))
+        if self.wiggle_rows is not None:
+            rows = np.zeros((2, N_GLOBAL))
+            rows[:, WIGGLE] = self.wiggle_rows[0]
+            A, c = np.vstack([A, rows]), np.r_[c, self.wiggle_rows[1]]
+        return A, c
+
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
         """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
         dpix, ddep, jp, jd = self.raw(state, jac)
-        prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
-                          for i in self.priors])
+        A, c = self._global_rows()
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
-                            ddep[self.has_depth] * self.depth_scale, prior])
+                            ddep[self.has_depth] * self.depth_scale, A @ np.r_[state.intrinsics, state.bias] - c])
         if not jac:
             return r, None
         rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
                                jd[self.has_depth] * self.depth_scale[:, None]])
-        view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth]])
-        g = rows[:, self.free_global]
-        pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
-        if self.priors:
-            gp = np.zeros((len(self.priors), len(self.free_global)))
-            for k, i in enumerate(self.priors):
-                gp[k, list(self.free_global).index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
-            g = np.vstack([g, gp])
-            pose = np.vstack([pose, np.zeros((len(self.priors), 6))])
-            view = np.concatenate([view, np.zeros(len(self.priors), dtype=int)])
+        view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth], np.zeros(len(A), dtype=int)])
+        g = np.vstack([rows[:, self.free_global], A[:, self.free_global]])
+        pose = np.vstack([rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6)), np.zeros((len(A), 6))])
         return r, BlockJacobian(g, pose, view)
+
+
+def _wiggle_rows(views: list[Observations]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(M, c) with |M w - c|^2 the cost, up to a constant, of the wiggle's terms ``w`` against the
+    views' depth off their planes (at each view's depth inflation, as its corner depths)."""
+    shapes = [(v.wiggle, v.depth_inflation) for v in views if v.wiggle is not None]
+    if not shapes:
+        return None
+    info = sum(s.information / k ** 2 for s, k in shapes)
+    moment = sum(s.moment / k ** 2 for s, k in shapes)
+    e, V = np.linalg.eigh(info)
+    e = np.maximum(e, UNCONSTRAINED * max(e.max(), 1e-300))
+    return np.sqrt(e)[:, None] * V.T, (V.T @ moment) / np.sqrt(e)
 
 
 @dataclass

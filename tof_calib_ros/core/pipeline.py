@@ -37,7 +37,9 @@ from .planarize import (
     directions,
     fit_plane_to,
     fit_samples,
+    off_plane,
     sample_depth,
+    smoothed,
 )
 from .result import (
     INTRINSIC_NAMES,
@@ -245,26 +247,26 @@ class _PlaneSamples:
 
 def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
                    convention: str, period: float | None = None
-                   ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[np.ndarray | None]]:
+                   ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[bundle.WiggleShape | None]]:
     """Corner depths as the camera would report them (the plane is fitted to depth corrected by
     the bias's planar terms, where the board really is flat), each view's depth error floor, the
-    planes, and where there is a wiggle (``period``) each corner's ``wiggle_curve``.
+    planes, and where there is a wiggle (``period``) what each view's depth says of it.
     The wiggle is not corrected before the plane is fitted: the plane would then depend on the
     wiggle's estimate, which near frontal settles on a wrong offset and wiggle that agree with the
     planes they shaped (1.7 % in fx on noiseless views). Instead the plane keeps the wiggle's planar
-    part, and the fit predicts that part (``bundle.Observations``).
+    part, and the fit predicts that part, and the depth off the plane (``bundle.WiggleShape``).
     A view without usable depth gets NaN depths: it counts with its corners only."""
     corner_dirs = np.split(directions(np.concatenate([v.corners for v in views]), intr, convention),
                            np.cumsum([len(v.corners) for v in views])[:-1])
     planar = bias.copy()
     planar[bias_model.TERMS["wiggle"]] = 0.0
-    depths, floors, planes, curves = [], [], [], []
+    depths, floors, planes, wiggles = [], [], [], []
     for v, smp, su, u in zip(views, samples.samples, samples.directions(intr, convention), corner_dirs):
         if smp is None:
             depths.append(np.full(len(v.corners), np.nan))
             floors.append(0.0)
             planes.append(None)
-            curves.append(None)
+            wiggles.append(None)
             continue
         flat = bias_model.true_depth(planar, smp.depth, su)
         plane = fit_plane_to(su, flat, smp.pixels, smp.black)
@@ -272,30 +274,35 @@ def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndar
         depths.append(bias_model.measured(planar, d, u * d[:, None]))
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
-        curves.append(None if period is None else _wiggle_curve(
-            su, flat, bias_model.true_depth(bias, smp.depth, su, period), smp, u, d, period))
-    return depths, floors, planes, curves
+        wiggles.append(None if period is None else _wiggle_shape(plane, su, flat, bias, smp, u, d, period))
+    return depths, floors, planes, wiggles
 
 
-def _wiggle_curve(su: np.ndarray, flat: np.ndarray, corrected: np.ndarray, smp: DepthSamples, u: np.ndarray,
-                  d: np.ndarray, period: float) -> np.ndarray:
-    """Each wiggle basis term at the corners (depth ``d`` along ``u``) less the plane fitted to it
-    over the samples (``flat``: their depth as the plane was fitted to it; ``corrected``: with
-    the wiggle's estimate removed too, which places the basis). The plane fit is linear in small
-    changes of depth: a millimetre of each term is fitted."""
+def _wiggle_shape(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndarray, smp: DepthSamples,
+                  u: np.ndarray, d: np.ndarray, period: float) -> bundle.WiggleShape:
+    """What a view's depth says of the wiggle: each basis term at the corners (depth ``d`` along
+    ``u``) less the plane fitted to it over the samples, and the samples' depth off the plane
+    (``flat``: their depth as the plane was fitted to it). The basis is placed at their smoothed
+    depth with the bias's estimate removed: at each sample's own, its noise would enter the basis
+    and bias what the depth off the plane says (by k sigma^2 a sample: 10 times the wiggle near
+    frontal). The plane fit is linear in small changes of depth: a millimetre of each term is
+    fitted."""
     step = 1e-3
+    planar = np.where(np.isin(np.arange(bias_model.N_BIAS), bias_model.TERMS["wiggle"]), 0.0, bias)
+    fitted = smoothed(plane, su, flat)
+    corrected = bias_model.true_depth(bias, bias_model.measured(planar, fitted, su * fitted[:, None]), su, period)
     basis = bias_model.wiggle_basis(period, corrected, corrected * np.linalg.norm(su, axis=1))
-    out = bias_model.wiggle_basis(period, d, d * np.linalg.norm(u, axis=1))
+    curve = bias_model.wiggle_basis(period, d, d * np.linalg.norm(u, axis=1))
     for k in range(2):
         moved, _ = corner_depth_along(fit_plane_to(su, flat + step * basis[:, k], smp.pixels, smp.black), u)
-        out[:, k] -= (moved - d) / step   # the planar part
-    return out
+        curve[:, k] -= (moved - d) / step   # the planar part
+    return bundle.WiggleShape(curve, *off_plane(plane, su, flat, smp.black, basis))
 
 
-def _observations(obj, views: list[_Prepared], depths, floors, curves,
+def _observations(obj, views: list[_Prepared], depths, floors, wiggles,
                   inflation: float = 1.0) -> list[bundle.Observations]:
-    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, c, inflation)
-            for o, v, d, f, c in zip(obj, views, depths, floors, curves)]
+    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, w, inflation)
+            for o, v, d, f, w in zip(obj, views, depths, floors, wiggles)]
 
 
 def _spread_deg(normals: np.ndarray) -> float:
@@ -581,9 +588,9 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes, curves = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
+        depths, floors, planes, wiggles = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
                                                         convention, options.wiggle_period)
-        observations = _observations(obj, prepared, depths, floors, curves, inflation)
+        observations = _observations(obj, prepared, depths, floors, wiggles, inflation)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         # the first round starts where the model's choice left it, on the same observations: only
@@ -901,7 +908,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
                                "disagree (corners out of order or of other frames, or another board?)") from exc
     say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
 
-    depths, floors, planes, curves = _planarize_all(prepared, plane_samples, intr, bias, convention,
+    depths, floors, planes, wiggles = _planarize_all(prepared, plane_samples, intr, bias, convention,
                                                     options.wiggle_period)
     poses = []
     for o, v, d in zip(obj, prepared, depths):
@@ -913,7 +920,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     state = bundle.State(intr, bias, np.array(poses))
     # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
-    observations = _observations(obj, prepared, depths, floors, curves)
+    observations = _observations(obj, prepared, depths, floors, wiggles)
     start = bundle.solve(observations, state, convention, [], rounds=1).state
     fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, start, False,
                                                           options, say)
