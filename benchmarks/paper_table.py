@@ -19,9 +19,10 @@ On the first ``--bound-trials`` scenes of each cell, the Cramér-Rao bound (``si
 what the views can support at best: ``corner_bound``, the least 3D error of any unbiased
 calibration from the corners alone with OpenCV's model (nine lens terms); ``depth_bound``, with
 every depth pixel too, for a method that knows which terms the sensor has (the lens's, the black
-squares' own offset, a wiggle of known period) and estimates them, and the depth's offset, which
-no ToF camera knows beforehand. OpenCV over ``depth_bound`` is about the largest ratio any method
-could show in that cell; ours over it, how much of what the views hold ours leaves on the table.
+squares' own offset, a wiggle, its period only where ours is told the modulation frequency) and
+estimates them, and the depth's offset, which no ToF camera knows beforehand. OpenCV over
+``depth_bound`` is about the largest ratio any method could show in that cell; ours over it, how
+much of what the views hold ours leaves on the table.
 
     python benchmarks/paper_table.py [--trials 20] [--bound-trials 5]
                                      [--regime near-frontal|general|both] [--sensor NAME ...]
@@ -89,12 +90,15 @@ def score(result, poses, camera: np.ndarray) -> float:
                          sim.SimCamera(camera, 200, 200), BOARD)
 
 
-def bounds(scene: Scene, seed: int) -> dict:
+def bounds(scene: Scene, seed: int, period_known: bool) -> dict:
     """The least 3D error (mm) any unbiased calibration makes on this scene: from the corners
-    alone with OpenCV's model, and with the depth knowing the sensor's terms but not its offset."""
+    alone with OpenCV's model, and with the depth knowing the sensor's terms but not its offset,
+    nor the wiggle's period where ours is not told the modulation frequency."""
     b = Bound(scene)
     lens = [k for k in NINE if k < 4 or scene.camera.params[k] != 0]
-    terms = ["offset"] + ["black"] * (scene.noise.dark_offset != 0) + ["wiggle"] * (scene.noise.wiggle_amplitude > 0)
+    wiggles = scene.noise.wiggle_amplitude > 0
+    terms = ["offset"] + ["black"] * (scene.noise.dark_offset != 0) + ["wiggle"] * wiggles \
+        + ["period"] * (wiggles and not period_known)
     rng = np.random.default_rng(seed)
     return dict(corner_bound=b.expected_3d_error(NINE, None, rng), depth_bound=b.expected_3d_error(lens, terms, rng))
 
@@ -114,7 +118,8 @@ def trial(args) -> dict:
         views.append(View(frame.depth, frame.corners[ids] + rng.normal(0, CORNER_NOISE, (len(ids), 2)), ids))
     out = {}
     if with_bound:
-        out["bound"] = bounds(Scene(camera, BOARD, poses, ids, sim.Noise(**noise), CORNER_NOISE), seed)
+        out["bound"] = bounds(Scene(camera, BOARD, poses, ids, sim.Noise(**noise), CORNER_NOISE), seed,
+                              "modulation_hz" in told)
     for name, kwargs in METHODS.items():
         t0 = time.perf_counter()
         try:

@@ -27,8 +27,9 @@ from ..core.board import Board
 from ..core.errors import CalibrationError
 from . import Noise, SimCamera, _surfaces
 
-# The depth error terms a bound may leave unknown: a column each (two for the wiggle's phase).
-DEPTH_TERMS = ("offset", "black", "wiggle")
+# The depth error terms a bound may leave unknown: a column each (two for the wiggle's amplitude and
+# phase; ``period``, the wiggle's period, for a method not told the modulation frequency).
+DEPTH_TERMS = ("offset", "black", "wiggle", "period")
 POSE = 6
 SINGULAR = 1e-12   # relative eigenvalue below which the views do not fix a combination of the unknowns
 WHITE = 0.9        # ``render``'s white albedo, which its noise and dark offset are relative to
@@ -100,7 +101,8 @@ def _depth_rows(scene: Scene, R: np.ndarray, t: np.ndarray, rvec: np.ndarray
                                                 + np.sin(phase)[:, None] * (grad / r[:, None]
                                                                             - (depth / r ** 3)[:, None] * P))
     d = np.einsum("nj,njq->nq", grad, dP)
-    terms = np.column_stack([np.ones(len(P)), dark, np.sin(k * r) * per, np.cos(k * r) * per])
+    period = -noise.wiggle_amplitude * np.cos(k * r + noise.wiggle_phase) * k * r / noise.wiggle_period * per
+    terms = np.column_stack([np.ones(len(P)), dark, np.sin(k * r) * per, np.cos(k * r) * per, period])
     w = 1 / sigma[:, None]
     return d[:, :cam.N_INTRINSICS] * w, d[:, cam.N_INTRINSICS:] * w, terms * w
 
@@ -108,7 +110,7 @@ def _depth_rows(scene: Scene, R: np.ndarray, t: np.ndarray, rvec: np.ndarray
 def _columns(depth_terms: list[str]) -> list[int]:
     if not set(depth_terms) <= set(DEPTH_TERMS):
         raise CalibrationError(f"depth terms must be among {DEPTH_TERMS}, got {depth_terms}")
-    return [c for name, cols in zip(DEPTH_TERMS, ([0], [1], [2, 3])) if name in depth_terms for c in cols]
+    return [c for name, cols in zip(DEPTH_TERMS, ([0], [1], [2, 3], [4])) if name in depth_terms for c in cols]
 
 
 def _error_rows(scene: Scene, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
