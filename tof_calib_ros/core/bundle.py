@@ -189,32 +189,31 @@ class Problem:
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
 
-    def _global_rows(self) -> tuple[np.ndarray, np.ndarray]:
-        """Whitened rows on the global parameters alone, A x - c: the depth terms' weak priors and
-        what the views' depth off their planes says of the wiggle."""
-        A = np.zeros((len(self.priors), N_GLOBAL))
-        A[np.arange(len(self.priors)), self.priors] = 1.0 / depth_bias.PRIOR_SIGMA[np.array(self.priors, dtype=int)
-                                                                                   - N_INTRINSICS]
-        c = np.zeros(len(self.priors))
-        if self.wiggle_rows is not None:
-            rows = np.zeros((2, N_GLOBAL))
-            rows[:, WIGGLE] = self.wiggle_rows[0]
-            A, c = np.vstack([A, rows]), np.r_[c, self.wiggle_rows[1]]
-        return A, c
-
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
-        """Whitened residual vector and, when asked, its Jacobian in the free parameters."""
+        """Whitened residual vector and, when asked, its Jacobian in the free parameters. Beside
+        the views' rows, rows on the global parameters alone: the depth terms' weak priors and
+        what the views' depth off their planes says of the wiggle."""
         dpix, ddep, jp, jd = self.raw(state, jac)
-        A, c = self._global_rows()
+        prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+                          for i in self.priors])
+        M, c = self.wiggle_rows if self.wiggle_rows is not None else (np.zeros((0, 2)), np.zeros(0))
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
-                            ddep[self.has_depth] * self.depth_scale, A @ np.r_[state.intrinsics, state.bias] - c])
+                            ddep[self.has_depth] * self.depth_scale, prior,
+                            M @ state.bias[depth_bias.TERMS["wiggle"]] - c])
         if not jac:
             return r, None
         rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
                                jd[self.has_depth] * self.depth_scale[:, None]])
-        view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth], np.zeros(len(A), dtype=int)])
-        g = np.vstack([rows[:, self.free_global], A[:, self.free_global]])
-        pose = np.vstack([rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6)), np.zeros((len(A), 6))])
+        free = list(self.free_global)
+        alone = np.zeros((len(self.priors) + len(M), len(free)))
+        for k, i in enumerate(self.priors):
+            alone[k, free.index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
+        if len(M):
+            alone[len(self.priors):, [free.index(i) for i in WIGGLE]] = M
+        view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth], np.zeros(len(alone), dtype=int)])
+        g = np.vstack([rows[:, self.free_global], alone])
+        pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
+        pose = np.vstack([pose, np.zeros((len(alone), 6))])
         return r, BlockJacobian(g, pose, view)
 
 
