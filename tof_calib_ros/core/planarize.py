@@ -255,15 +255,38 @@ def off_plane(plane: Plane, directions: np.ndarray, depth: np.ndarray, black: np
     the moment (K,) of the residuals' part the plane's three parameters cannot absorb, each
     sample weighted by its colour's noise. The terms' estimate from them is information^-1 moment.
     A plane keeps only a term's planar part; this is the rest, which near frontal is most of
-    what the depth says of a wiggle."""
+    what the depth says of a wiggle. Noise shared between neighbouring pixels (a driver's
+    smoothing filter) makes the samples worth fewer: both are divided by ``noise_spread``."""
     s = directions @ plane.coef
     r = depth - 1.0 / s
     J = directions / s[:, None] ** 2
     w = 1 / _colour_noise(r, black) ** 2
     Jw = J * w[:, None]
     off = basis - J @ np.linalg.solve(Jw.T @ J, Jw.T @ basis)
-    offw = off * w[:, None]
+    offw = off * w[:, None] / noise_spread(plane.pixels, r * np.sqrt(w))
     return offw.T @ off, offw.T @ r
+
+
+def noise_spread(pixels: np.ndarray, noise: np.ndarray, lags: int = 3) -> float:
+    """How many times its independent share the variance of a smooth fit to a pixel grid's
+    ``noise`` is: the summed correlations of samples 1 to ``lags`` pixels apart, across and down
+    (pooled), in each of the two directions, (1 + 2 sum rho)^2; 1 for independent noise, 9 for
+    a 3 x 3 box filter's."""
+    pixels = np.rint(pixels).astype(int)
+    width = int(pixels[:, 0].max(initial=0)) + lags + 1
+    keys = pixels[:, 1] * width + pixels[:, 0]
+    order = np.argsort(keys)
+    ranked = keys[order]
+    total = 0.0
+    for lag in range(1, lags + 1):
+        num = den = 0.0
+        for step in (lag, lag * width):
+            at = np.minimum(np.searchsorted(ranked, keys + step), len(keys) - 1)
+            hit = ranked[at] == keys + step
+            a, b = noise[hit], noise[order[at[hit]]]
+            num, den = num + a @ b, den + (a @ a + b @ b) / 2
+        total += num / den if den > 0 else 0.0
+    return max(1.0 + 2.0 * total, 1.0) ** 2
 
 
 def smoothed(plane: Plane, directions: np.ndarray, depth: np.ndarray) -> np.ndarray:
