@@ -225,8 +225,27 @@ def main() -> None:
                 print(f"  the bound {what}, mm:")
                 print("\n".join(_grid(sel, b, "8.3f")))
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps({"trials": args.trials, "summary": summary, "rows": rows}, indent=1))
+    args.output.write_text(json.dumps(merged(args.output, args.trials, summary, rows), indent=1))
     print(f"wrote {args.output}")
+
+
+def merged(path: Path, trials: int, summary: list[dict], rows: list[dict]) -> dict:
+    """The results file with these rows in place of the same sensors' and regimes', the others
+    kept: a run of one sensor (``--sensor``) must not drop the rest of the table."""
+    old = json.loads(path.read_text()) if path.is_file() else {}
+    if old.get("trials") != trials:   # a table mixes no trial counts
+        old = {}
+    done = {(x["sensor"], x["regime"]) for x in summary}
+    order = [(s, r) for s in SENSORS for r in REGIMES]
+
+    def key(x: dict) -> tuple:
+        return order.index((x["sensor"], x["regime"])), x.get("corners", 0), x.get("images", 0)
+
+    def kept(entries: list[dict]) -> list[dict]:
+        return [x for x in entries if (x["sensor"], x["regime"]) not in done and (x["sensor"], x["regime"]) in order]
+
+    return {"trials": trials, "summary": sorted(kept(old.get("summary", [])) + summary, key=key),
+            "rows": sorted(kept(old.get("rows", [])) + rows, key=key)}
 
 
 if __name__ == "__main__":
