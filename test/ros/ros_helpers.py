@@ -31,6 +31,11 @@ START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can tak
 RESEND_S = 5.0   # a repeatable call unanswered this long is sent again (Spinner.call says why)
 
 
+def calibrating(resp) -> bool:
+    """~/calibrate's answer to a copy of a call it is still at work on (Spinner.call's ``busy``)."""
+    return "already running" in resp.message
+
+
 def executable(name: str) -> Path:
     try:
         return _executable(name)

@@ -17,7 +17,15 @@ rclpy = pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed 
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from ros_helpers import RESEND_S, START_TIMEOUT_S, call_together, logs, set_parameter, wait_until  # noqa: E402
+from ros_helpers import (  # noqa: E402
+    RESEND_S,
+    START_TIMEOUT_S,
+    calibrating,
+    call_together,
+    logs,
+    set_parameter,
+    wait_until,
+)
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -271,7 +279,7 @@ def test_bag_parameter_replays_a_recording_then_calibrates_and_publishes(launch,
     # A bag that cannot be read: said in the log and by ~/calibrate; the node stays up.
     broken = launch("calibration_node", "-r", "__ns:=/b2", "-p", f"bag.path:={tmp_path / 'no_such_bag'}")
     resp = spinner.call(Trigger, "/b2/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=(broken,),
-                        resend_after=RESEND_S)
+                        resend_after=RESEND_S, busy=calibrating)
     assert not resp.success and "cannot replay the bag" in resp.message and "no such bag" in resp.message, \
         resp.message
     assert broken.alive()
@@ -292,7 +300,7 @@ def test_a_board_that_never_stops_is_calibrated_live(launch, spinner, tmp_path):
     node = launch("calibration_node", "-r", "__ns:=/m1", "-p", f"output_dir:={out}")
     assert play(spinner.node, "/m1", bag, 10.0, (node,)) == 200
     resp = spinner.call(Trigger, "/m1/calibration_node/calibrate", timeout=CALIBRATE_TIMEOUT_S, procs=(node,),
-                        resend_after=RESEND_S)
+                        resend_after=RESEND_S, busy=calibrating)
     assert resp.success, resp.message + "\n" + logs(node)
     doc = json.loads((out / "calibration.json").read_text())
     K, K_true = np.array(doc["camera_matrix"]), np.array(truth["camera_matrix"])

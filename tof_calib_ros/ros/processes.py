@@ -162,32 +162,42 @@ class Spinner:
         return self._clients[key]
 
     def call(self, srv_type: Any, name: str, request: Any = None, timeout: float = 30.0,
-             procs: tuple[NodeProcess, ...] = (), resend_after: float | None = None) -> Any:
+             procs: tuple[NodeProcess, ...] = (), resend_after: float | None = None,
+             busy: Callable[[Any], bool] | None = None) -> Any:
         """Call a service as `ros2 service call` does: wait for it, send, wait for the answer.
 
         Fast DDS drops an answer when the server has not yet discovered the client's reply reader
         ("failed to send response (timeout)" in the server's log), which a loaded machine makes
         likely for a new client. A call that may safely be repeated (parameters, reset, commit)
-        passes ``resend_after`` and is sent again while unanswered; the first answer counts.
+        passes ``resend_after`` and is sent again while unanswered; the first answer counts, but
+        one that ``busy`` says is the server still at work on an earlier copy (~/calibrate's
+        "already running", when a calibration outlasts ``resend_after``): that answer shows the
+        call arrived, so nothing more is sent and the earlier copy's answer is awaited.
         """
         client = self.client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise RosProcessError(f"service {name} not available within {timeout:g} s\n" + logs(*procs))
         request = srv_type.Request() if request is None else request
         done = threading.Event()
-        futures = []
+        futures: list = []
         deadline = time.monotonic() + timeout
-        while not done.is_set():
+        while True:
+            done.clear()   # before looking: an answer that comes after it sets it again
+            answers = [f for f in futures if f.done()]
+            taken = [f for f in answers if busy is None or not busy(f.result())]
+            if taken:
+                break
             left = deadline - time.monotonic()
             if left <= 0:
                 for f in futures:
                     client.remove_pending_request(f)
                 raise RosProcessError(f"service {name} did not answer within {timeout:g} s\n" + logs(*procs))
-            future = client.call_async(request)
-            future.add_done_callback(lambda _f: done.set())
-            futures.append(future)
+            if not futures or (resend_after is not None and not answers):
+                future = client.call_async(request)
+                future.add_done_callback(lambda _f: done.set())
+                futures.append(future)
             done.wait(left if resend_after is None else min(left, resend_after))
-        answered = next(f for f in futures if f.done())
+        answered = taken[0]
         for f in futures:
             if f is not answered:
                 client.remove_pending_request(f)
