@@ -42,10 +42,6 @@ VIEW_COUNTS = (3, 4, 5, 6, 7)
 _views: list[View] = []
 
 
-def told(mhz: float) -> str:
-    return f"ours, {mhz:g} MHz given"
-
-
 def load(data: Path, scale: float) -> list[View]:
     """Views with a detected board; downsampling averages the IR and keeps depth's nearest pixel."""
     views = []
@@ -193,7 +189,7 @@ def main() -> None:
     ap.add_argument("--modulation-mhz", type=float, nargs="+", default=[],
                     help="also run ours told each of these modulation frequencies")
     args = ap.parse_args()
-    METHODS.update({told(f): dict(modulation_hz=f * 1e6) for f in args.modulation_mhz})
+    METHODS.update({f"ours, {f:g} MHz given": dict(modulation_hz=f * 1e6) for f in args.modulation_mhz})
     if not args.data.is_dir():
         raise SystemExit(f"Kinect data not found at {args.data}")
     full = run_scale(load(args.data, 1.0), 1.0, args.draws, args.jobs, None)

@@ -154,8 +154,7 @@ def on_surface(directions: np.ndarray, depth: np.ndarray, start: np.ndarray, rou
     noise it put fx 1 px (4 of its sigmas) off. The surface is fitted over the rays, which are
     exact: fitted to the points in 3D, their own noise along the rays tilts it. One sigma for
     all trims the noisiest samples (the black squares' tails), on both sides alike."""
-    x, y = directions[:, 0] / directions[:, 2], directions[:, 1] / directions[:, 2]
-    cubic = np.column_stack([x ** i * y ** j for i in range(4) for j in range(4 - i)])
+    cubic = _cubic(directions[:, 0] / directions[:, 2], directions[:, 1] / directions[:, 2])
     keep = start.copy()
     for _ in range(rounds):
         if keep.sum() <= cubic.shape[1]:
@@ -165,6 +164,11 @@ def on_surface(directions: np.ndarray, depth: np.ndarray, start: np.ndarray, rou
         r = r - cubic @ np.linalg.lstsq(cubic[keep], r[keep], rcond=None)[0]
         keep = np.abs(r) < 3 * max(1.4826 * np.median(np.abs(r[keep])), 1e-12)
     return keep
+
+
+def _cubic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(N, 10) the monomials of a cubic in two coordinates: a board's smooth bow over its rays."""
+    return np.column_stack([x ** i * y ** j for i in range(4) for j in range(4 - i)])
 
 
 def _svd_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -317,8 +321,7 @@ def smoothed(plane: Plane, directions: np.ndarray, depth: np.ndarray) -> np.ndar
     by the distance) is placed here: at each sample's own depth, the noise enters the term and
     biases what is fitted with it; at the plane's, the curvature it leaves out misplaces it."""
     fitted = 1.0 / (directions @ plane.coef)
-    x, y = directions[:, 0], directions[:, 1]
-    cubic = np.column_stack([x ** i * y ** j for i in range(4) for j in range(4 - i)])
+    cubic = _cubic(directions[:, 0], directions[:, 1])
     return fitted + cubic @ np.linalg.lstsq(cubic, depth - fitted, rcond=None)[0]
 
 
