@@ -1,7 +1,6 @@
 """The model chosen by the data: each rule recovers the true model of a sensor made to have it."""
 import numpy as np
 import pytest
-from scipy.stats import chi2
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core import camera as cam
@@ -118,7 +117,7 @@ def test_a_depth_that_pulls_the_corners_off_their_fit_gives_way_to_them():
         noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
         res = calibrate(_views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 4, 100 * seed + 9, noise=noise), BOARD)
         assert res.model.depth_inflation > 1
-        assert any("the depth at its full weight pulls the corners" in r for r in res.model.reasons), res.model.reasons
+        assert any("fit worse with the depth at its full weight" in r for r in res.model.reasons), res.model.reasons
         assert abs(res.K[0, 0] / F - 1) < 0.005 and abs(res.K[0, 0] - F) < 2 * res.std["fx"], (seed, res.K[0, 0])
         full.append(abs(res.to_dict()["depth_full_weight_focal"]["fx"] / F - 1))
     assert np.median(full) > 0.01, full   # the depth alone was off: the corners made the difference
@@ -273,27 +272,3 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     problem = bundle.Problem(obs, "z", np.full(5, 0.01), np.full(5, 1e-3), [0, 1, 2, 3], True, None, period)
     _, ddep, _, _ = problem.raw(truth)
     assert np.max(np.abs(ddep)) < 2e-5, np.max(np.abs(ddep))
-
-
-def test_a_depth_that_moves_the_intrinsics_off_the_corners_gives_way_to_them():
-    """General poses, 9 corners a view, 15 mm of wiggling without the modulation frequency: the
-    corners fit about as well with the depth as alone, yet the depth at its full weight can move
-    fx several of the corners' own sigmas (1.0 and 1.7 px, 4.4 and 8 of them, in 2 of 8 seeds).
-    Its weight falls until fx, fy, cx, cy are back within the corners-alone fit's 99 % region:
-    every result is within it, within 0.5 % of the truth and within 2 of its stated sigmas."""
-    limit = np.sqrt(chi2.ppf(0.99, 4))   # no single term of the four lies further out than the region
-    gave_way = 0
-    for seed in range(8):
-        rng = np.random.default_rng(seed)
-        noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
-        res = calibrate(_views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 9, 100 * seed + 11, noise=noise),
-                        BOARD)
-        corner_fx, _, corner_std, _ = res.corner_focal
-        full = res.to_dict()["depth_full_weight_focal"]["fx"]
-        assert abs(res.K[0, 0] - corner_fx) <= limit * corner_std, (seed, res.K[0, 0], corner_fx, corner_std)
-        assert abs(res.K[0, 0] / F - 1) < 0.005 and abs(res.K[0, 0] - F) < 2 * res.std["fx"], (seed, res.K[0, 0])
-        if abs(full - corner_fx) > limit * corner_std:
-            gave_way += 1
-            assert res.model.depth_inflation > 1
-            assert any("chi-square" in r for r in res.model.reasons), res.model.reasons
-    assert gave_way >= 1   # the depth at its full weight was out of the region: the rule made the difference

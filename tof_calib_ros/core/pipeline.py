@@ -60,14 +60,8 @@ PLANE_DOF = 3.0  # a view's denoised corner depths are one plane: three independ
 DEPTH_UNITS_RANGE = (1e-6, 1.0)  # metres per unit: micrometres to metres
 MIN_SPREAD_PX = 0.5  # corners closer than this (RMS) to one line in the image say nothing across it
 BLACK_APART_SIGMAS = 5.0  # a black-square offset this many standard errors from 0 keeps them out of the planes
-DEPTH_INFLATION_STEP = 2.0  # the depth's error is raised by this factor until the corners agree with it
+DEPTH_INFLATION_STEP = 2.0  # the depth's error is raised by this factor until the corners fit as well as alone
 MAX_DEPTH_INFLATION = 64.0  # and at most to this many times its noise: the depth is then all but silent
-# The depth also yields where it moves fx, fy, cx, cy out of the corners-alone fit's own confidence
-# region at this false-alarm rate. On 24 scenes each of general poses with 15 mm of wiggling it did
-# so in 9, where the depth at its full weight put the 3D error at 2.2 to 55 mm (OpenCV 0.2 to 1.5);
-# on as many scenes without wiggling (general and near frontal, with and without an offset) it
-# never exceeded chi-square 13.8 (4 degrees of freedom).
-APART_P = 0.01
 MIN_SQUARE_PIXELS = 30  # fewer pixels of one colour say nothing of its offset or its bow
 # A depth level this many standard errors from the corners' is a depth scale. Low, since what it
 # sets off is mild (a scale term, which the corners fix) and what a miss costs is not: in general
@@ -634,17 +628,6 @@ def _pixel_noise(fit: bundle.Fit, model: Model) -> tuple[float, int]:
     return noise_per_dof(fit.pixel_residuals, 4 + len(DISTORTION_TERMS.get(model.distortion, [])))
 
 
-def _apart(fit: bundle.Fit, alone: bundle.Fit) -> float:
-    """How far the fit's fx, fy, cx, cy lie from the corners-alone fit's, in the corners-alone
-    covariance (chi-square, 4 degrees of freedom). Where the depth agrees with the corners the
-    difference's covariance is that covariance less the fit's, so this errs low; the Hausman form,
-    with the difference, is not positive definite where the depth misleads most (stop 26)."""
-    free = list(alone.free_global)
-    idx = [free.index(i) for i in range(4)]
-    d = fit.state.intrinsics[:4] - alone.state.intrinsics[:4]
-    return float(d @ np.linalg.pinv(alone.covariance[np.ix_(idx, idx)]) @ d)
-
-
 def _one_distance(z: np.ndarray) -> bool:
     """Whether the views' distances spread too little to tell a scale from an offset."""
     return bool(np.ptp(z) <= MIN_DISTANCE_SPREAD * np.mean(z))
@@ -955,9 +938,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     depth_focal, full_depths = _focal(fit), depths   # what the depth says at its full weight
     found = [squares_reason] * bool(squares_reason) + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
-    # Where the depth pulls the corners off their fit (their residuals, or the intrinsics out of their
-    # own confidence region), its error is one the model does not explain (a wiggle the views' tilts
-    # see): its weight falls until they agree
+    # Where the depth pulls the corners off their fit, its error is one the model does not explain
+    # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone
     corner_noise = None if corner_fit is None else noise_per_dof(corner_fit.pixel_residuals,
                                                                  len(corner_fit.free_global))
     full_weight = _pixel_noise(fit, model)
@@ -965,10 +947,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # by the effect's size alone: 4 corners a view leave the corners-alone fit 2 degrees of freedom,
     # which leave the F-test without power (a wiggle 17 times the corners' noise passed it, trusted
     # 1.7 % off at 4 sigmas), and the depth yielding where it need not costs little
-    full_apart = None if corner_fit is None else _apart(fit, corner_fit)
-    apart_limit = scipy_chi2.ppf(1 - APART_P, 4)
-    while corner_noise is not None and inflation < MAX_DEPTH_INFLATION and (corners_pulled(
-            _pixel_noise(fit, model), corner_noise, tested=False) or _apart(fit, corner_fit) > apart_limit):
+    while corner_noise is not None and inflation < MAX_DEPTH_INFLATION and corners_pulled(
+            _pixel_noise(fit, model), corner_noise, tested=False):
         inflation *= DEPTH_INFLATION_STEP
         lighter = [replace(o, depth_inflation=inflation) for o in observations]
         fit, free, chosen, depths, planes, observations = _fit(prepared, plane_samples, obj, lighter, start,
@@ -977,11 +957,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if inflation > 1:
         model.depth_inflation = inflation
         model.reasons.append(
-            f"the depth at its full weight pulls the corners off their own fit ({full_weight[0]:.3f} against "
-            f"{corner_noise[0]:.3f} px a degree of freedom; fx, fy, cx, cy chi-square {full_apart:.1f} from the "
-            f"corners-alone fit's, in its covariance; the depth says fx={depth_focal[0]:.1f} px): a depth error the "
-            f"model does not explain; its error is taken as {inflation:g} times its noise, where they agree "
-            f"(at most {MAX_DEPTH_INFLATION:g})")
+            f"the corners fit worse with the depth at its full weight than alone ({full_weight[0]:.3f} against "
+            f"{corner_noise[0]:.3f} px a degree of freedom; the depth says fx={depth_focal[0]:.1f} px): a depth "
+            f"error the model does not explain; its error is taken as {inflation:g} times its noise, where they fit "
+            f"about as well (at most {MAX_DEPTH_INFLATION:g})")
         say(model.reasons[-1])
     bowl = _bowl_check(plane_samples, fit, convention, check.level) \
         if options.depth_bias == "auto" and options.wiggle_period is None else None
