@@ -78,6 +78,9 @@ BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0 (pooled
 # a factor 1.26 apart, over which the wiggle across a board's distances changes little.
 WIGGLE_CANDIDATES_HZ = np.geomspace(8e6, 130e6, 13)
 WIGGLE_PRICE_TERMS = 3  # its sine, cosine and period, at the information criterion's ln(n) each
+# A wiggle larger than this is a depth scale in disguise (a square half its size gave one of 0.5 m
+# at 10 MHz); ToF cameras wiggle by millimetres to a few centimetres.
+MAX_WIGGLE_M = 0.1
 WIGGLE_P = 0.001  # and its amplitude beyond its views' jackknife at this false-alarm rate
 MIN_PERIOD_WEIGHT = 1e-3  # periods this much less likely than the chosen one are not refitted
 
@@ -616,7 +619,7 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
     """Without the modulation frequency: a wiggle at the candidate period whose score-test gain
     is largest, taken where that gain exceeds the price of its sine, cosine and period, is not
     at either end of the periods looked for, and where its amplitude, refitted at that period,
-    stands beyond the views' jackknife. The gain alone is not enough: it counts every sample of
+    is one a ToF camera can have and stands beyond the views' jackknife. The gain alone is not enough: it counts every sample of
     the board, so it finds sub-millimetre structure on large recordings and, on the real Kinect
     v2 views (which unwrap three frequencies: no one sinusoid), a wiggle of 2-4 mm at 1.3 to 2.5
     of its jackknife sigmas that took 5-6 views' fx 2.6 % off."""
@@ -638,12 +641,19 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
     refit = _fit(prepared, plane_samples, obj, _observations(obj, prepared, depths, floors, wiggles), start, False,
                  wiggly, say)
     fitted, free, views = refit[0], refit[1], refit[5]
+    w = fitted.state.bias[bias_model.TERMS["wiggle"]]
+    amplitude = f"{np.hypot(*w) * 1e3:.1f} mm"
+    if np.hypot(*w) > MAX_WIGGLE_M:
+        found.reason = (f"no wiggle in the depth: the one the score test found (gain {gains[k]:.1f} against its price "
+                        f"{price:.1f}, at {hz / 1e6:.0f} MHz) would be {amplitude}, beyond any ToF camera's: over "
+                        "the distances seen it is a depth scale (is the square size right, and the depth's units?)")
+        say(found.reason)
+        return found
     stated = bundle.jackknifed(views, fitted, convention, CORNER_FOLDS, free, options.loss)
     at = np.isin(stated.free_global, [N_INTRINSICS + t for t in bias_model.TERMS["wiggle"]])
-    w, cov = fitted.state.bias[bias_model.TERMS["wiggle"]], stated.covariance[np.ix_(at, at)]
+    cov = stated.covariance[np.ix_(at, at)]
     z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
     evidence["amplitude_chi2"] = round(z2, 3)
-    amplitude = f"{np.hypot(*w) * 1e3:.1f} mm"
     if z2 <= scipy_chi2.ppf(1 - WIGGLE_P, 2):
         found.reason = (f"no wiggle in the depth: the score test found one (gain {gains[k]:.1f} against its price "
                         f"{price:.1f}, at {hz / 1e6:.0f} MHz), but its amplitude, {amplitude}, lies within its "
@@ -682,7 +692,8 @@ def _over_periods(prepared, plane_samples, obj, observations, fit: bundle.Fit, f
         depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
                                                     options.depth_convention, other.wiggle_period)
         views = _observations(obj, prepared, depths, floors, wiggles, observations[0].depth_inflation)
-        there = _joint(prepared, plane_samples, obj, views, state, free, other, say)[0]
+        there = bundle.solve(views, state, options.depth_convention, free, loss=options.loss,
+                             wiggle_period=other.wiggle_period)
         # the wiggle's own terms mean another function at another period: only the rest compare
         delta = np.where(np.isin(fit.free_global, wiggle), 0.0,
                          np.r_[there.state.intrinsics, there.state.bias][fit.free_global] - here)
