@@ -525,8 +525,9 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     given, the wiggle is always estimated: near frontal views cannot tell it from the focal
     length (its slope over their distances is a depth scale), so a test of it there would
     pass it over and trust a focal length it has bent; estimated, its uncertainty is the
-    focal length's. Not given, the caller looks for a wiggle beforehand (``_wiggle_gains``) and
-    passes the period it chose as if given. A depth scale is never chosen
+    focal length's. Not given, the caller looks for one at the model chosen without it
+    (``_look_for_wiggle``) and, where it finds one, chooses again with its period as if given.
+    A depth scale is never chosen
     here: it would make the depth silent on the focal length (the two trade exactly), a ToF
     camera's scale is set by its modulation frequency, and a scale the data seem to call for
     is a wrong square size or depth unit, which the verdict reports."""
@@ -619,10 +620,11 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
     """Without the modulation frequency: a wiggle at the candidate period whose score-test gain
     is largest, taken where that gain exceeds the price of its sine, cosine and period, is not
     at either end of the periods looked for, and where its amplitude, refitted at that period,
-    is one a ToF camera can have and stands beyond the views' jackknife. The gain alone is not enough: it counts every sample of
-    the board, so it finds sub-millimetre structure on large recordings and, on the real Kinect
-    v2 views (which unwrap three frequencies: no one sinusoid), a wiggle of 2-4 mm at 1.3 to 2.5
-    of its jackknife sigmas that took 5-6 views' fx 2.6 % off."""
+    is one a ToF camera can have and stands beyond the views' jackknife. The gain alone is not
+    enough: it counts every sample of the board, so it finds sub-millimetre structure on large
+    recordings and, on the real Kinect v2 views (which unwrap three frequencies: no one
+    sinusoid), wiggles of 2-4 mm (chi-square 5 to 10 against their jackknife, on 2 degrees of
+    freedom), one of which took 5-6 views' fx 2.6 % off."""
     convention = options.depth_convention
     gains = _wiggle_gains(prepared, plane_samples, obj, fit, convention)
     price = WIGGLE_PRICE_TERMS * np.log(bundle.n_observations(observations))
