@@ -414,19 +414,27 @@ def test_check_passes_the_calibration_and_fails_the_factory_one(bags, calibrated
     doc = json.loads((tmp_path / "check.json").read_text())
     assert doc["pixel_rms"] < 0.2 and abs(doc["depth_mean_m"]) < 0.002 and len(doc["views"]) >= 15
     assert abs(doc["depth_scale"]) < 0.003 and all(v["plane_sigma"] < 0.005 for v in doc["views"])
-    # a calibration.json from before the wiggle term (neither its terms nor a modulation) reads the same
-    older = tmp_path / "older" / "calibration.yaml"
-    older.parent.mkdir()
-    older.write_bytes((calibrated / "calibration.yaml").read_bytes())
+    # a calibration.json from before the wiggle term (neither its terms nor a period) reads as one
+    # whose wiggle is 0; the period the data chose is read back (without it the depth fits worse)
     sidecar = json.loads((calibrated / "calibration.json").read_text())
-    for name in TERMS_ADDED_LATER:
-        del sidecar["depth_bias"][name]
-    del sidecar["options"]["modulation_hz"]
-    older.with_suffix(".json").write_text(json.dumps(sidecar))
-    code, out_older, err = run(capsys, "check", older, bags["mcap"], *BOARD)
-    assert code == EXIT_OK, err
-    depth_line = re.compile(r"depth residuals.*")
-    assert depth_line.search(out_older)[0] == depth_line.search(out)[0]
+    depth_line = re.compile(r"depth residuals mean (\S+) mm, RMS (\S+) mm.*")
+    lines = {}
+    for name in ("zeroed", "older"):
+        copy = tmp_path / name / "calibration.yaml"
+        copy.parent.mkdir()
+        copy.write_bytes((calibrated / "calibration.yaml").read_bytes())
+        for term in TERMS_ADDED_LATER:
+            sidecar["depth_bias"][term] = 0.0
+            if name == "older":
+                del sidecar["depth_bias"][term]
+        if name == "older":
+            del sidecar["options"]["modulation_hz"], sidecar["model"]["wiggle_period"]
+        copy.with_suffix(".json").write_text(json.dumps(sidecar))
+        code, out_copy, err = run(capsys, "check", copy, bags["mcap"], *BOARD)
+        assert code == EXIT_OK, err
+        lines[name] = depth_line.search(out_copy)
+    assert lines["older"][0] == lines["zeroed"][0]
+    assert float(depth_line.search(out)[2]) <= float(lines["zeroed"][2])
     # the YAML alone: the camera's 20 mm depth offset is then unknown, and not held against it
     alone = tmp_path / "alone" / "calibration.yaml"
     alone.parent.mkdir()

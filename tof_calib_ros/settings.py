@@ -96,7 +96,8 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
             "tilt and wiggle where the data call for them), none, or offset, scale, tilt, wiggle joined by +",
             flag="--depth-bias", check=_depth_model),
     Setting("depth.modulation_mhz", 0.0, "the ToF camera's modulation frequency, MHz: given, the depth model always "
-            "estimates a wiggling error of period c / (8 f) (1.87 m at 20 MHz); 0: not known, no wiggling term",
+            "estimates a wiggling error of period c / (8 f) (1.87 m at 20 MHz); 0: not known, the data choose the "
+            "period (8-130 MHz) where they show a wiggle",
             flag="--modulation-mhz", low=0.0, high=10000.0),
     Setting("calibration.distortion", "auto", "distortion terms: auto (those the data call for) or none, "
             "k1, k1k2, plumb_bob, full", flag="--distortion", choices=("auto", *DISTORTION_TERMS)),

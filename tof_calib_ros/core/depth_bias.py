@@ -8,9 +8,9 @@
 axis, which is what a driver's z-depth computed with its own factory principal point looks
 like to first order. The wiggling term is the periodic error of a continuous-wave ToF camera
 (Lindner and Kolb): a function of the light's path, the radial distance ``r``, whose period
-the modulation sets (c / (8 f) for four-phase sampling: 1.87 m at 20 MHz), so it is only
-estimated when the period is given; ``depth / r`` carries it into a z-depth. Left out of the
-model, each of them biases the intrinsics.
+the modulation sets (c / (8 f) for four-phase sampling: 1.87 m at 20 MHz), so the period is
+the one of the frequency given, or one the data chose; ``depth / r`` carries it into a
+z-depth. Left out of the model, each of them biases the intrinsics.
 """
 from __future__ import annotations
 
@@ -44,6 +44,11 @@ def parse(spec: str) -> list[int]:
 def wiggle_period(modulation_hz: float) -> float:
     """The wiggling error's period in distance (m) of a four-phase ToF camera at this modulation."""
     return SPEED_OF_LIGHT / (8.0 * modulation_hz)
+
+
+def modulation_hz(period: float) -> float:
+    """The modulation frequency whose wiggle has this period (m): the inverse of ``wiggle_period``."""
+    return SPEED_OF_LIGHT / (8.0 * period)
 
 
 def wiggle_basis(period: float | None, depth: np.ndarray, radial: np.ndarray) -> np.ndarray:

@@ -30,7 +30,9 @@ class CalibrationOptions:
     'auto' (the whole board unless the black squares read apart from the white), 'white' (the
     paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'. ``modulation_hz``: the camera's
     modulation frequency, which sets the period of its wiggling error; given, 'auto' always
-    estimates a wiggling term (see depth_bias), which cannot be estimated without it."""
+    estimates a wiggling term; not given, 'auto' looks for one over the periods ToF cameras
+    have and takes it where the data call for it (see pipeline._select_model). A depth_bias
+    naming 'wiggle' needs it."""
 
     method: str = "depth"
     depth_convention: str = "z"
@@ -67,13 +69,13 @@ class CalibrationOptions:
     def fixed(self, model: Model) -> CalibrationOptions:
         """These options with every 'auto' replaced by what ``model`` chose: the same
         calibration on other views (halves, held-out views) without choosing again."""
+        hz = self.modulation_hz if model.wiggle_period is None else bias_model.modulation_hz(model.wiggle_period)
         return CalibrationOptions(self.method, self.depth_convention, self.depth_units, model.depth_bias,
-                                  model.distortion, self.loss, model.plane_squares, self.min_views,
-                                  self.modulation_hz)
+                                  model.distortion, self.loss, model.plane_squares, self.min_views, hz)
 
     @property
     def wiggle_period(self) -> float | None:
-        """The wiggling error's period (m), where the modulation frequency is known."""
+        """The wiggling error's period (m), where the modulation frequency is given."""
         return None if self.modulation_hz is None else bias_model.wiggle_period(self.modulation_hz)
 
     def to_dict(self) -> dict:
@@ -88,7 +90,9 @@ class Model:
     statistic exceeds the price.
     ``dropped_corners``: board indices, per view, of corners a robust loss removed.
     ``depth_inflation``: how many times its noise the depth's error was taken to be, where the
-    depth at its full weight pulled the corners off their fit (1: its noise)."""
+    depth at its full weight pulled the corners off their fit (1: its noise).
+    ``wiggle_period``: the period (m) of the depth model's wiggle, where it has one: from the
+    modulation frequency given, or the one the data chose."""
 
     distortion: str = "none"
     depth_bias: str = "none"
@@ -97,6 +101,7 @@ class Model:
     reasons: list[str] = field(default_factory=list)
     dropped_corners: dict[int, list[int]] = field(default_factory=dict)
     depth_inflation: float = 1.0
+    wiggle_period: float | None = None
 
     def to_dict(self) -> dict:
         out = asdict(self)

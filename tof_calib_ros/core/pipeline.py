@@ -74,6 +74,15 @@ MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are a
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
 BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0 (pooled, or view by view at the same
 #                   false-alarm rate): the depth error is not planar in z
+# Without the modulation frequency, the periods looked for: those of 8 to 130 MHz (4.7 to 0.29 m),
+# a factor 1.26 apart, over which the wiggle across a board's distances changes little.
+WIGGLE_CANDIDATES_HZ = np.geomspace(8e6, 130e6, 13)
+WIGGLE_PRICE_TERMS = 3  # its sine, cosine and period, at the information criterion's ln(n) each
+# A wiggle larger than this is a depth scale in disguise (a square half its size gave one of 0.5 m
+# at 10 MHz); ToF cameras wiggle by millimetres to a few centimetres.
+MAX_WIGGLE_M = 0.1
+WIGGLE_P = 0.001  # and its amplitude beyond its views' jackknife at this false-alarm rate
+MIN_PERIOD_WEIGHT = 1e-3  # periods this much less likely than the chosen one are not refitted
 
 
 @dataclass
@@ -516,7 +525,9 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     given, the wiggle is always estimated: near frontal views cannot tell it from the focal
     length (its slope over their distances is a depth scale), so a test of it there would
     pass it over and trust a focal length it has bent; estimated, its uncertainty is the
-    focal length's. A depth scale is never chosen
+    focal length's. Not given, the caller looks for one at the model chosen without it
+    (``_look_for_wiggle``) and, where it finds one, chooses again with its period as if given.
+    A depth scale is never chosen
     here: it would make the depth silent on the focal length (the two trade exactly), a ToF
     camera's scale is set by its modulation frequency, and a scale the data seem to call for
     is a wrong square size or depth unit, which the verdict reports."""
@@ -572,10 +583,124 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
         model.reasons.append(f"chosen by the data: distortion {model.distortion}, depth terms {model.depth_bias} ("
                              + ", ".join(f"{k} {v['gain']:.1f} vs {v['price']:.1f}" for k, v in model.evidence.items())
                              + ": the cost each term would remove against its price)"
-                             + (f"; the wiggle always, of period {period:.3f} m from the modulation frequency"
-                                if period is not None and options.depth_bias == "auto" else ""))
+                             + (f"; the wiggle always, of period {period:.3f} m" if period is not None
+                                and options.depth_bias == "auto" else ""))
         say(model.reasons[-1])
     return fit.state, sorted(free), model
+
+
+def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit, convention: str) -> np.ndarray:
+    """The score test's gain for a wiggle of each candidate period, at ``fit`` (which has none):
+    what the views' distances and their depth off their planes say of it. The planes, and so
+    the test, need no refit per period: without a wiggle they do not depend on it."""
+    extra = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
+    gains = []
+    for hz in WIGGLE_CANDIDATES_HZ:
+        period = bias_model.wiggle_period(hz)
+        depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, fit.state.intrinsics, fit.state.bias,
+                                                    convention, period)
+        gains.append(bundle.score(_observations(obj, prepared, depths, floors, wiggles),
+                                  replace(fit, wiggle_period=period), convention, extra))
+    return np.array(gains)
+
+
+@dataclass
+class _WiggleSearch:
+    """What the search for a wiggle of unknown period found: ``refit`` (what ``_fit`` returns) at
+    the period of ``hz`` where one was taken, with each candidate period's ``gains``."""
+    evidence: dict[str, float]
+    reason: str
+    gains: np.ndarray
+    hz: float
+    refit: tuple | None = None
+
+
+def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit, start: bundle.State,
+                     intr: np.ndarray, bias: np.ndarray, options: CalibrationOptions, say) -> _WiggleSearch:
+    """Without the modulation frequency: a wiggle at the candidate period whose score-test gain
+    is largest, taken where that gain exceeds the price of its sine, cosine and period, is not
+    at either end of the periods looked for, and where its amplitude, refitted at that period,
+    is one a ToF camera can have and stands beyond the views' jackknife. The gain alone is not
+    enough: it counts every sample of the board, so it finds sub-millimetre structure on large
+    recordings and, on the real Kinect v2 views (which unwrap three frequencies: no one
+    sinusoid), wiggles of 2-4 mm (chi-square 5 to 10 against their jackknife, on 2 degrees of
+    freedom), one of which took 5-6 views' fx 2.6 % off."""
+    convention = options.depth_convention
+    gains = _wiggle_gains(prepared, plane_samples, obj, fit, convention)
+    price = WIGGLE_PRICE_TERMS * np.log(bundle.n_observations(observations))
+    k = int(np.argmax(gains))
+    hz = float(WIGGLE_CANDIDATES_HZ[k])
+    evidence = {"gain": round(float(gains[k]), 3), "price": round(float(price), 3)}
+    found = _WiggleSearch(evidence, "", gains, hz)
+    if gains[k] <= price or k in (0, len(gains) - 1):
+        found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
+                        + (f"below its price, {price:.1f}" if gains[k] <= price else
+                           "at the end of the periods looked for (an error, but not a wiggle of such a period)"))
+        say(found.reason)
+        return found
+    wiggly = replace(options, modulation_hz=hz)
+    depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, intr, bias, convention, wiggly.wiggle_period)
+    refit = _fit(prepared, plane_samples, obj, _observations(obj, prepared, depths, floors, wiggles), start, False,
+                 wiggly, say)
+    fitted, free, views = refit[0], refit[1], refit[5]
+    w = fitted.state.bias[bias_model.TERMS["wiggle"]]
+    amplitude = f"{np.hypot(*w) * 1e3:.1f} mm"
+    if np.hypot(*w) > MAX_WIGGLE_M:
+        found.reason = (f"no wiggle in the depth: the one the score test found (gain {gains[k]:.1f} against its price "
+                        f"{price:.1f}, at {hz / 1e6:.0f} MHz) would be {amplitude}, beyond any ToF camera's: over "
+                        "the distances seen it is a depth scale (is the square size right, and the depth's units?)")
+        say(found.reason)
+        return found
+    stated = bundle.jackknifed(views, fitted, convention, CORNER_FOLDS, free, options.loss)
+    at = np.isin(stated.free_global, [N_INTRINSICS + t for t in bias_model.TERMS["wiggle"]])
+    cov = stated.covariance[np.ix_(at, at)]
+    z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
+    evidence["amplitude_chi2"] = round(z2, 3)
+    if z2 <= scipy_chi2.ppf(1 - WIGGLE_P, 2):
+        found.reason = (f"no wiggle in the depth: the score test found one (gain {gains[k]:.1f} against its price "
+                        f"{price:.1f}, at {hz / 1e6:.0f} MHz), but its amplitude, {amplitude}, lies within its "
+                        f"views' jackknife (chi-square {z2:.1f} on 2 degrees of freedom)")
+        say(found.reason)
+        return found
+    found.refit = refit
+    found.reason = (f"a wiggle in the depth of period {wiggly.wiggle_period:.3f} m (as of {hz / 1e6:.0f} MHz) "
+                    f"chosen by the data: the score test's gain {gains[k]:.1f} against the price of its sine, "
+                    f"cosine and period, {price:.1f}; amplitude {amplitude} (chi-square {z2:.1f} against the views' "
+                    "jackknife); the stated uncertainties include the fits at the other periods, as likely as "
+                    "the data make them")
+    say(found.reason)
+    return found
+
+
+def _over_periods(prepared, plane_samples, obj, observations, fit: bundle.Fit, free: list[int],
+                  options: CalibrationOptions, gains: np.ndarray, say) -> bundle.Fit:
+    """The fit at the period the data chose, its covariance widened by how far the fits at the
+    other candidate periods lie, each weighted by its likelihood against the chosen (the score
+    test's gain as the likelihood ratio; a model average with the period unknown). Views that
+    cannot tell the period (near frontal, at one distance) leave the periods near-equally likely
+    and their fits a few standard deviations apart: at the chosen period alone, a third of such
+    results were trusted with the truth beyond 2 stated sigmas."""
+    weights = np.exp(0.5 * (gains - gains.max()))
+    weights /= weights.sum()
+    wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
+    here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
+    spread = np.zeros_like(fit.covariance)
+    for hz, weight in zip(WIGGLE_CANDIDATES_HZ, weights):
+        if weight < MIN_PERIOD_WEIGHT or np.isclose(bias_model.wiggle_period(hz), options.wiggle_period):
+            continue
+        other = replace(options, modulation_hz=float(hz))
+        state = fit.state.copy()
+        state.bias[bias_model.TERMS["wiggle"]] = 0.0
+        depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
+                                                    options.depth_convention, other.wiggle_period)
+        views = _observations(obj, prepared, depths, floors, wiggles, observations[0].depth_inflation)
+        there = bundle.solve(views, state, options.depth_convention, free, loss=options.loss,
+                             wiggle_period=other.wiggle_period)
+        # the wiggle's own terms mean another function at another period: only the rest compare
+        delta = np.where(np.isin(fit.free_global, wiggle), 0.0,
+                         np.r_[there.state.intrinsics, there.state.bias][fit.free_global] - here)
+        spread += weight * np.outer(delta, delta)
+    return replace(fit, covariance=fit.covariance + spread)
 
 
 def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say):
@@ -928,6 +1053,13 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     start = bundle.solve(observations, state, convention, [], rounds=1).state
     fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, start, False,
                                                           options, say)
+    asked, found_wiggle = options, None
+    if options.depth_bias == "auto" and options.modulation_hz is None:
+        found_wiggle = _look_for_wiggle(prepared, plane_samples, obj, observations, fit, start, intr, bias, options,
+                                        say)
+        if found_wiggle.refit is not None:
+            options = replace(options, modulation_hz=found_wiggle.hz)
+            fit, free, model, depths, planes, observations = found_wiggle.refit
     check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
@@ -936,7 +1068,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, fit.state,
                                                               True, options, say, model, free)
     depth_focal, full_depths = _focal(fit), depths   # what the depth says at its full weight
-    found = [squares_reason] * bool(squares_reason) + check.reasons
+    found = ([] if found_wiggle is None else [found_wiggle.reason]) + [squares_reason] * bool(squares_reason) \
+        + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
     # Where the depth pulls the corners off their fit, its error is one the model does not explain
     # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone
@@ -971,8 +1104,13 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1, check.level ** 2)
         model.reasons.append(bowl)
         say(bowl)
+    if found_wiggle is not None and found_wiggle.refit is not None:
+        fit = _over_periods(prepared, plane_samples, obj, observations, fit, free, options, found_wiggle.gains, say)
     stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
-    result = _result(options, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
+    model.wiggle_period = options.wiggle_period
+    if found_wiggle is not None:
+        model.evidence["wiggle"] = found_wiggle.evidence
+    result = _result(asked, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
                      noise_fit, depth_focal)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(

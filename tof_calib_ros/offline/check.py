@@ -88,8 +88,11 @@ def load_calibration(yaml_path: str | Path) -> Calibration:
             bias = np.array([float(doc["depth_bias"].get(name, 0.0) if name in bias_model.TERMS_ADDED_LATER
                                    else doc["depth_bias"][name]) for name in bias_model.NAMES])
             convention = doc["depth_convention"]
-            hz = doc.get("options", {}).get("modulation_hz")
-            period = None if hz is None else bias_model.wiggle_period(float(hz))
+            # the period chosen; files written before the data could choose it have the frequency given
+            period, hz = doc.get("model", {}).get("wiggle_period"), doc.get("options", {}).get("modulation_hz")
+            if period is None and hz is not None:
+                period = bias_model.wiggle_period(float(hz))
+            period = None if period is None else float(period)
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise CalibrationFileError(f"{sidecar}: not a calibration.json with depth_bias and "
                                        f"depth_convention ({exc})") from None

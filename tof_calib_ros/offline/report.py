@@ -155,7 +155,7 @@ def _view_data(views: Sequence[View], board: Board, result: CalibrationResult,
         X = transform(rep.rvec, rep.tvec, board.object_points(ids))[0]
         measured = project(X, intr).pixels - rep.pixel_residuals
         distance = depth_of(X, result.depth_convention)[0]
-        model = bias_model.measured(result.depth_bias, distance, X, result.options.wiggle_period)
+        model = bias_model.measured(result.depth_bias, distance, X, result.model.wiggle_period)
         normal = cv2.Rodrigues(np.asarray(rep.rvec, dtype=float).reshape(3, 1))[0][:, 2]
         out.append(_ViewData(rep.index, ids, measured, rep.pixel_residuals, distance, model,
                              model - rep.depth_residuals, sample_depth(depth, measured),
@@ -528,7 +528,7 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
         return '<p class="note">No view was planarized (a traditional calibration, or no usable depth).</p>'
     d = data[j]
     intr = pack_intrinsics(result.K, result.D)
-    conv, bias, period = result.depth_convention, result.depth_bias, result.options.wiggle_period
+    conv, bias, period = result.depth_convention, result.depth_bias, result.model.wiggle_period
     try:
         samples = board_samples(d.depth, d.measured, d.ids, board, intr, d.amplitude,
                                 squares=result.model.plane_squares)
