@@ -7,11 +7,13 @@ from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.planarize import (
     board_samples,
     corner_depth,
+    corner_depth_along,
     fit_plane_to,
     fit_samples,
     noise_spread,
     off_plane,
     on_surface,
+    planar_part,
     planarize,
     ransac_inliers,
     sample_depth,
@@ -208,6 +210,33 @@ def test_the_depth_off_its_plane_measures_a_curved_term_without_bias():
     assert np.all(std < 0.005), std                                  # three views pin the wiggle to a few mm
     assert np.all(np.abs(estimates.mean(0) - w) < 3 * std / np.sqrt(len(estimates)) + 3e-4), (estimates.mean(0), w)
     assert np.all(np.abs(estimates.std(0) / std - 1) < 0.15), (estimates.std(0), std)
+
+
+@pytest.mark.parametrize("with_black", [False, True])
+def test_the_planar_part_of_a_term_is_where_a_refitted_plane_moves(with_black):
+    """``planar_part`` (one solve of the fit's normal equations) against refitting the plane to
+    the depth with a millimetre of each term added (black squares, when sampled, with their own
+    noise): the corners' depth moves as the refit moves it, to a thousandth of the term (measured:
+    1e-4, the refit's own millimetre step being finite)."""
+    rng = np.random.default_rng(5)
+    xs, ys = np.meshgrid(np.linspace(-0.3, 0.3, 50), np.linspace(-0.25, 0.25, 40))
+    u = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    pixels = np.column_stack(np.unravel_index(np.arange(xs.size), xs.shape)[::-1])
+    black = (rng.random(len(u)) < 0.4) if with_black else np.zeros(len(u), dtype=bool)
+    true = 1.0 / (u @ np.array([0.3, -0.2, 1 / 0.8]))          # tilted 15-20 degrees, 0.8 m away
+    depth = true + rng.normal(0, 0.004, len(u)) * np.where(black, 3.0, 1.0)
+    period = depth_bias.wiggle_period(30e6)
+    basis = np.column_stack([depth_bias.wiggle_basis(period, true, true * np.linalg.norm(u, axis=1)),
+                             (u[:, 0] ** 2 + u[:, 1] ** 2)])   # a wiggle's two terms and a bowl
+    corners = u[rng.choice(len(u), 12, replace=False)]
+    plane = fit_plane_to(u, depth, pixels, black)
+    at, _ = corner_depth_along(plane, corners)
+    step = 1e-3
+    refit = np.column_stack([(corner_depth_along(fit_plane_to(u, depth + step * basis[:, k], pixels, black),
+                                                 corners)[0] - at) / step for k in range(basis.shape[1])])
+    got = planar_part(plane, u, depth, black, basis, corners)
+    assert np.abs(refit).max() > 0.1                  # a plane keeps much of each term
+    assert np.abs(got - refit).max() < 1e-3 * np.abs(refit).max(), np.abs(got - refit).max()
 
 
 def test_noise_a_smoothing_filter_shared_between_pixels_counts_as_fewer_samples():
