@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -38,6 +39,7 @@ from .planarize import (
     fit_plane_to,
     fit_samples,
     off_plane,
+    planar_part,
     sample_depth,
     smoothed,
 )
@@ -265,17 +267,27 @@ def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndar
     planes they shaped (1.7 % in fx on noiseless views). Instead the plane keeps the wiggle's planar
     part, and the fit predicts that part, and the depth off the plane (``bundle.WiggleShape``).
     A view without usable depth gets NaN depths: it counts with its corners only."""
+    depths, floors, planes, shapes = _planarize_periods(views, samples, intr, bias, convention,
+                                                        [] if period is None else [period])
+    return depths, floors, planes, [s[0] if s else None for s in shapes]
+
+
+def _planarize_periods(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
+                       convention: str, periods: Sequence[float]
+                       ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[list[bundle.WiggleShape]]]:
+    """``_planarize_all`` with what each view's depth says of a wiggle of each of ``periods``:
+    the planes once for them all."""
     corner_dirs = np.split(directions(np.concatenate([v.corners for v in views]), intr, convention),
                            np.cumsum([len(v.corners) for v in views])[:-1])
     planar = bias.copy()
     planar[bias_model.TERMS["wiggle"]] = 0.0
-    depths, floors, planes, wiggles = [], [], [], []
+    depths, floors, planes, shapes = [], [], [], []
     for v, smp, su, u in zip(views, samples.samples, samples.directions(intr, convention), corner_dirs):
         if smp is None:
             depths.append(np.full(len(v.corners), np.nan))
             floors.append(0.0)
             planes.append(None)
-            wiggles.append(None)
+            shapes.append([])
             continue
         flat = bias_model.true_depth(planar, smp.depth, su)
         plane = fit_plane_to(su, flat, smp.pixels, smp.black)
@@ -283,33 +295,40 @@ def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndar
         depths.append(bias_model.measured(planar, d, u * d[:, None]))
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
-        wiggles.append(None if period is None else _wiggle_shape(plane, su, flat, bias, planar, smp, u, period))
-    return depths, floors, planes, wiggles
+        shapes.append(_wiggle_shapes(plane, su, flat, bias, planar, smp, u, periods) if periods else [])
+    return depths, floors, planes, shapes
 
 
-def _wiggle_shape(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndarray, planar: np.ndarray,
-                  smp: DepthSamples, u: np.ndarray, period: float) -> bundle.WiggleShape:
-    """What a view's depth says of the wiggle: each basis term at the corners (along ``u``) less
-    the plane fitted to it over the samples, and the samples' depth off the plane (``flat``:
-    their depth as the plane was fitted to it, with ``planar``, the bias less its wiggle, taken
-    out). The basis is placed at the samples' smoothed depth with the bias's estimate removed: at
-    each sample's own, its noise would enter the basis and bias what the depth off the plane
-    says (by k sigma^2 a sample: 10 times the wiggle near frontal). At the corners it is placed
-    on the plane of that depth: on the fitted plane, which holds the wiggle's planar part, the
-    fit's depth model was 0.2-0.35 mm off at the true parameters with 15 mm of wiggling, which
-    near frontal moved fx by up to 1 px. The plane fit is linear in small changes of depth: a
-    millimetre of each term is fitted."""
-    step = 1e-3
+def _wiggle_shapes(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndarray, planar: np.ndarray,
+                   smp: DepthSamples, u: np.ndarray, periods: Sequence[float]) -> list[bundle.WiggleShape]:
+    """What a view's depth says of a wiggle of each period: each basis term at the corners (along
+    ``u``) less the part of it a plane fitted over the samples keeps, and the samples' depth off
+    the plane (``flat``: their depth as the plane was fitted to it, with ``planar``, the bias less
+    its wiggle, taken out). The basis is placed at the samples' smoothed depth with the bias's
+    estimate removed: at each sample's own, its noise would enter the basis and bias what the
+    depth off the plane says (by k sigma^2 a sample: 10 times the wiggle near frontal). At the
+    corners it is placed on the plane of that depth: on the fitted plane, which holds the
+    wiggle's planar part, the fit's depth model was 0.2-0.35 mm off at the true parameters with
+    15 mm of wiggling, which near frontal moved fx by up to 1 px."""
+    wiggle = bias[bias_model.TERMS["wiggle"]]
     fitted = smoothed(plane, su, flat)
-    corrected = bias_model.true_depth(bias, bias_model.measured(planar, fitted, su * fitted[:, None]), su, period)
-    basis = bias_model.wiggle_basis(period, corrected, corrected * np.linalg.norm(su, axis=1))
-    clean = flat - basis @ bias[bias_model.TERMS["wiggle"]]
-    at, _ = corner_depth_along(fit_plane_to(su, clean, smp.pixels, smp.black), u)
-    curve = bias_model.wiggle_basis(period, at, at * np.linalg.norm(u, axis=1))
-    for k in range(2):
-        moved, _ = corner_depth_along(fit_plane_to(su, clean + step * basis[:, k], smp.pixels, smp.black), u)
-        curve[:, k] -= (moved - at) / step   # the planar part
-    return bundle.WiggleShape(curve, *off_plane(plane, su, flat, smp.black, basis))
+    on_plane = bias_model.measured(planar, fitted, su * fitted[:, None])
+    along_su, along_u = np.linalg.norm(su, axis=1), np.linalg.norm(u, axis=1)
+    bases, curves = [], []
+    for period in periods:
+        corrected = bias_model.true_depth(bias, on_plane, su, period)
+        basis = bias_model.wiggle_basis(period, corrected, corrected * along_su)
+        clean = flat - basis @ wiggle
+        # without a wiggle estimate yet (a search over periods) the plane is the one fitted already
+        at_plane = fit_plane_to(su, clean, smp.pixels, smp.black) if wiggle.any() else plane
+        at, _ = corner_depth_along(at_plane, u)
+        curves.append(bias_model.wiggle_basis(period, at, at * along_u)
+                      - planar_part(at_plane, su, clean, smp.black, basis, u))
+        bases.append(basis)
+    # the samples off the plane, for every period at once: their noise weights are shared
+    information, moment = off_plane(plane, su, flat, smp.black, np.hstack(bases))
+    return [bundle.WiggleShape(c, information[2 * k:2 * k + 2, 2 * k:2 * k + 2], moment[2 * k:2 * k + 2])
+            for k, c in enumerate(curves)]
 
 
 def _observations(obj, views: list[_Prepared], depths, floors, wiggles,
@@ -589,34 +608,38 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     return fit.state, sorted(free), model
 
 
-def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit, convention: str) -> np.ndarray:
-    """The score test's gain for a wiggle of each candidate period, at ``fit`` (which has none):
-    what the views' distances and their depth off their planes say of it. The planes, and so
-    the test, need no refit per period: without a wiggle they do not depend on it."""
+def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit,
+                  convention: str) -> tuple[np.ndarray, list[list[bundle.Observations]]]:
+    """The score test's gain for a wiggle of each candidate period, at ``fit`` (which has none),
+    and the views as each period has them: what their distances and their depth off their
+    planes say of it. The planes, and so the test, need no refit per period: without a wiggle
+    they do not depend on it."""
     extra = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
-    gains = []
-    for hz in WIGGLE_CANDIDATES_HZ:
-        period = bias_model.wiggle_period(hz)
-        depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, fit.state.intrinsics, fit.state.bias,
-                                                    convention, period)
-        gains.append(bundle.score(_observations(obj, prepared, depths, floors, wiggles),
-                                  replace(fit, wiggle_period=period), convention, extra))
-    return np.array(gains)
+    periods = [bias_model.wiggle_period(hz) for hz in WIGGLE_CANDIDATES_HZ]
+    depths, floors, _, shapes = _planarize_periods(prepared, plane_samples, fit.state.intrinsics, fit.state.bias,
+                                                   convention, periods)
+    at_each = [_observations(obj, prepared, depths, floors, [s[k] if s else None for s in shapes])
+               for k in range(len(periods))]
+    gains = [bundle.score(views, replace(fit, wiggle_period=period), convention, extra)
+             for views, period in zip(at_each, periods)]
+    return np.array(gains), at_each
 
 
 @dataclass
 class _WiggleSearch:
-    """What the search for a wiggle of unknown period found: ``refit`` (what ``_fit`` returns) at
-    the period of ``hz`` where one was taken, with each candidate period's ``gains``."""
+    """What the search for a wiggle of unknown period found: each candidate period's ``gains`` and
+    the views as that period has them (``views_at``), and where a wiggle was taken, the period of
+    ``hz`` and the fit with it (``refit``)."""
     evidence: dict[str, float]
     reason: str
     gains: np.ndarray
+    views_at: list[list[bundle.Observations]]
     hz: float
-    refit: tuple | None = None
+    refit: _Fitted | None = None
 
 
-def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit, start: bundle.State,
-                     intr: np.ndarray, bias: np.ndarray, options: CalibrationOptions, say) -> _WiggleSearch:
+def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundle.State,
+                     options: CalibrationOptions, say) -> _WiggleSearch:
     """Without the modulation frequency: a wiggle at the candidate period whose score-test gain
     is largest, taken where that gain exceeds the price of its sine, cosine and period, is not
     at either end of the periods looked for, and where its amplitude, refitted at that period,
@@ -624,14 +647,15 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
     enough: it counts every sample of the board, so it finds sub-millimetre structure on large
     recordings and, on the real Kinect v2 views (which unwrap three frequencies: no one
     sinusoid), wiggles of 2-4 mm (chi-square 5 to 10 against their jackknife, on 2 degrees of
-    freedom), one of which took 5-6 views' fx 2.6 % off."""
+    freedom), one of which took 5-6 views' fx 2.6 % off. The refit chooses the model again from
+    ``start``, the state the choice without it started from."""
     convention = options.depth_convention
-    gains = _wiggle_gains(prepared, plane_samples, obj, fit, convention)
-    price = WIGGLE_PRICE_TERMS * np.log(bundle.n_observations(observations))
+    gains, views_at = _wiggle_gains(prepared, plane_samples, obj, fitted.fit, convention)
+    price = WIGGLE_PRICE_TERMS * np.log(bundle.n_observations(fitted.observations))
     k = int(np.argmax(gains))
     hz = float(WIGGLE_CANDIDATES_HZ[k])
     evidence = {"gain": round(float(gains[k]), 3), "price": round(float(price), 3)}
-    found = _WiggleSearch(evidence, "", gains, hz)
+    found = _WiggleSearch(evidence, "", gains, views_at, hz)
     if gains[k] <= price or k in (0, len(gains) - 1):
         found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
                         + (f"below its price, {price:.1f}" if gains[k] <= price else
@@ -639,11 +663,8 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
         say(found.reason)
         return found
     wiggly = replace(options, modulation_hz=hz)
-    depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, intr, bias, convention, wiggly.wiggle_period)
-    refit = _fit(prepared, plane_samples, obj, _observations(obj, prepared, depths, floors, wiggles), start, False,
-                 wiggly, say)
-    fitted, free, views = refit[0], refit[1], refit[5]
-    w = fitted.state.bias[bias_model.TERMS["wiggle"]]
+    refit = _fit(prepared, plane_samples, obj, views_at[k], start, False, wiggly, say)
+    w = refit.fit.state.bias[bias_model.TERMS["wiggle"]]
     amplitude = f"{np.hypot(*w) * 1e3:.1f} mm"
     if np.hypot(*w) > MAX_WIGGLE_M:
         found.reason = (f"no wiggle in the depth: the one the score test found (gain {gains[k]:.1f} against its price "
@@ -651,7 +672,7 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
                         "the distances seen it is a depth scale (is the square size right, and the depth's units?)")
         say(found.reason)
         return found
-    stated = bundle.jackknifed(views, fitted, convention, CORNER_FOLDS, free, options.loss)
+    stated = bundle.jackknifed(refit.observations, refit.fit, convention, CORNER_FOLDS, refit.free, options.loss)
     at = np.isin(stated.free_global, [N_INTRINSICS + t for t in bias_model.TERMS["wiggle"]])
     cov = stated.covariance[np.ix_(at, at)]
     z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
@@ -672,30 +693,28 @@ def _look_for_wiggle(prepared, plane_samples, obj, observations, fit: bundle.Fit
     return found
 
 
-def _over_periods(prepared, plane_samples, obj, observations, fit: bundle.Fit, free: list[int],
-                  options: CalibrationOptions, gains: np.ndarray, say) -> bundle.Fit:
+def _over_periods(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
+                  options: CalibrationOptions, search: _WiggleSearch) -> bundle.Fit:
     """The fit at the period the data chose, its covariance widened by how far the fits at the
     other candidate periods lie, each weighted by its likelihood against the chosen (the score
     test's gain as the likelihood ratio; a model average with the period unknown). Views that
     cannot tell the period (near frontal, at one distance) leave the periods near-equally likely
     and their fits a few standard deviations apart: at the chosen period alone, a third of such
-    results were trusted with the truth beyond 2 stated sigmas."""
-    weights = np.exp(0.5 * (gains - gains.max()))
+    results were trusted with the truth beyond 2 stated sigmas. Each is one solve from this fit,
+    on the views as the search planarized them for its period."""
+    weights = np.exp(0.5 * (search.gains - search.gains.max()))
     weights /= weights.sum()
     wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
     here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
     spread = np.zeros_like(fit.covariance)
-    for hz, weight in zip(WIGGLE_CANDIDATES_HZ, weights):
-        if weight < MIN_PERIOD_WEIGHT or np.isclose(bias_model.wiggle_period(hz), options.wiggle_period):
+    state = fit.state.copy()
+    state.bias[bias_model.TERMS["wiggle"]] = 0.0
+    for hz, weight, at_period in zip(WIGGLE_CANDIDATES_HZ, weights, search.views_at):
+        period = bias_model.wiggle_period(hz)
+        if weight < MIN_PERIOD_WEIGHT or np.isclose(period, options.wiggle_period):
             continue
-        other = replace(options, modulation_hz=float(hz))
-        state = fit.state.copy()
-        state.bias[bias_model.TERMS["wiggle"]] = 0.0
-        depths, floors, _, wiggles = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
-                                                    options.depth_convention, other.wiggle_period)
-        views = _observations(obj, prepared, depths, floors, wiggles, observations[0].depth_inflation)
-        there = bundle.solve(views, state, options.depth_convention, free, loss=options.loss,
-                             wiggle_period=other.wiggle_period)
+        views = [replace(o, depth_inflation=observations[0].depth_inflation) for o in at_period]
+        there = bundle.solve(views, state, options.depth_convention, free, loss=options.loss, wiggle_period=period)
         # the wiggle's own terms mean another function at another period: only the rest compare
         delta = np.where(np.isin(fit.free_global, wiggle), 0.0,
                          np.r_[there.state.intrinsics, there.state.bias][fit.free_global] - here)
@@ -729,8 +748,18 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
     return fit, depths, planes, observations
 
 
+class _Fitted(NamedTuple):
+    """A joint fit with the model it was fitted with, and the views as it planarized them."""
+    fit: bundle.Fit
+    free: list[int]
+    model: Model
+    depths: list[np.ndarray]
+    planes: list[Plane | None]
+    observations: list[bundle.Observations]
+
+
 def _fit(prepared, plane_samples, obj, observations, state, scale: bool, options: CalibrationOptions, say,
-         model: Model | None = None, free: list[int] | None = None):
+         model: Model | None = None, free: list[int] | None = None) -> _Fitted:
     """The model the data call for (unless ``model`` and its ``free`` parameters are given) and the
     joint fit with it, with a depth scale term where ``scale``. Returns the fit, its free
     parameters, the model, and what ``_joint`` returns beside the fit."""
@@ -740,7 +769,7 @@ def _fit(prepared, plane_samples, obj, observations, state, scale: bool, options
         free = sorted({*free, N_INTRINSICS + 1})
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
     fit, depths, planes, observations = _joint(prepared, plane_samples, obj, observations, state, free, options, say)
-    return fit, free, model, depths, planes, observations
+    return _Fitted(fit, free, model, depths, planes, observations)
 
 
 def _focal(fit: bundle.Fit) -> tuple[float, float, float, float]:
@@ -1051,15 +1080,14 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
     observations = _observations(obj, prepared, depths, floors, wiggles)
     start = bundle.solve(observations, state, convention, [], rounds=1).state
-    fit, free, model, depths, planes, observations = _fit(prepared, plane_samples, obj, observations, start, False,
-                                                          options, say)
+    fitted = _fit(prepared, plane_samples, obj, observations, start, False, options, say)
     asked, found_wiggle = options, None
     if options.depth_bias == "auto" and options.modulation_hz is None:
-        found_wiggle = _look_for_wiggle(prepared, plane_samples, obj, observations, fit, start, intr, bias, options,
-                                        say)
+        found_wiggle = _look_for_wiggle(prepared, plane_samples, obj, fitted, start, options, say)
         if found_wiggle.refit is not None:
             options = replace(options, modulation_hz=found_wiggle.hz)
-            fit, free, model, depths, planes, observations = found_wiggle.refit
+            fitted = found_wiggle.refit
+    fit, free, model, depths, planes, observations = fitted
     check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
@@ -1105,7 +1133,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         model.reasons.append(bowl)
         say(bowl)
     if found_wiggle is not None and found_wiggle.refit is not None:
-        fit = _over_periods(prepared, plane_samples, obj, observations, fit, free, options, found_wiggle.gains, say)
+        fit = _over_periods(observations, fit, free, options, found_wiggle)
     stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
