@@ -28,10 +28,7 @@ from tof_calib_ros.ros.processes import executable as _executable  # noqa: E402
 from tof_calib_ros.ros.processes import wait_until as _wait_until  # noqa: E402
 
 START_TIMEOUT_S = 30.0   # process start (imports) plus discovery, which can take a few seconds
-# a repeatable call unanswered this long is sent again (Spinner.call says why); longer than a
-# calibration of 30 simulated views takes (up to 9 s since the wiggle search), or each resend
-# meets the one before still running
-RESEND_S = 15.0
+RESEND_S = 5.0   # a repeatable call unanswered this long is sent again (Spinner.call says why)
 
 
 def calibrating(resp) -> bool:
