@@ -278,7 +278,10 @@ def test_a_stopped_calibration_worker_times_out_and_is_replaced(launch, spinner,
     import psutil
 
     ns = "/f6"
-    procs = _start(launch, ns, tmp_path / "out", "-p", "calibration.timeout:=3.0")
+    # short, but beyond a calibration of the first views (3.1 s for 11 in a CI run, where the
+    # depth of the simulator's moving board shows a sub-millimetre wiggle and it is fitted)
+    timeout = 10
+    procs = _start(launch, ns, tmp_path / "out", "-p", f"calibration.timeout:={timeout:.1f}")
     node = procs[1]
     _calibrate_when_ready(spinner, ns, procs)
     workers = [p for p in psutil.Process(node.proc.pid).children(recursive=True)
@@ -288,8 +291,8 @@ def test_a_stopped_calibration_worker_times_out_and_is_replaced(launch, spinner,
         p.suspend()
     t0 = time.monotonic()
     resp = spinner.call(Trigger, f"{ns}/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
-    assert not resp.success and "did not answer in 3 s" in resp.message, resp.message
-    assert time.monotonic() - t0 < 20.0
+    assert not resp.success and f"did not answer in {timeout} s" in resp.message, resp.message
+    assert time.monotonic() - t0 < timeout + 17.0
     psutil.wait_procs(workers, timeout=10)
     assert not any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in workers), "the stopped worker lives"
     again = spinner.call(Trigger, f"{ns}/calibration_node/calibrate", timeout=START_TIMEOUT_S, procs=procs)
