@@ -151,6 +151,28 @@ def test_a_near_frontal_wiggle_of_unknown_period_is_found_and_fx_is_within_its_s
     assert len(beyond) <= 1, beyond
 
 
+def test_a_near_frontal_wiggle_the_search_leaves_out_still_counts_in_fx_sigma():
+    """Three near-frontal views of 9 corners often cannot show a 15 mm wiggle: its gain falls
+    short of its price, or peaks at the end of the periods looked for, and the model is chosen
+    without it. fx's uncertainty then includes the fits with a wiggle at each period, as likely
+    as the data make them. Over these eight seeds the wiggle is left out in five; counting only
+    the fits at other periods when one was taken, two were trusted with the truth beyond 2
+    stated sigmas (0.6 % off at 2.6 sigmas, 1.9 % off at 2.8); now none is, and every fx lies
+    within 2 of its sigmas (measured 0.2-1.4)."""
+    lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
+    left_out = 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=rng.uniform(0, 6.28))
+        res = calibrate(_views(lens, 3, 9, seed=100 * seed + 7, tilt=5.0, noise=noise), BOARD)
+        z = abs(res.K[0, 0] - F) / res.std["fx"]
+        assert z < 2, (seed, res.K[0, 0], res.std["fx"], res.model.reasons)
+        if res.model.wiggle_period is None:
+            left_out += 1
+            assert res.std["fx"] > res.noise_std["fx"], (seed, res.std, res.noise_std)
+    assert left_out >= 3, left_out
+
+
 @pytest.mark.parametrize("amplitude", [0.015, 0.0])
 def test_the_wiggle_is_estimated_where_the_modulation_frequency_is_given(amplitude):
     """The modulation frequency gives the wiggle's period (1.87 m at 20 MHz); its amplitude and

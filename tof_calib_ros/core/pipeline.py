@@ -84,7 +84,7 @@ WIGGLE_PRICE_TERMS = 3  # its sine, cosine and period, at the information criter
 # at 10 MHz); ToF cameras wiggle by millimetres to a few centimetres.
 MAX_WIGGLE_M = 0.1
 WIGGLE_P = 0.001  # and its amplitude beyond its views' jackknife at this false-alarm rate
-MIN_PERIOD_WEIGHT = 1e-3  # periods this much less likely than the chosen one are not refitted
+MIN_MODEL_WEIGHT = 1e-3  # depth models this much less likely than the rest together are not refitted
 
 
 @dataclass
@@ -627,13 +627,16 @@ def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit,
 
 @dataclass
 class _WiggleSearch:
-    """What the search for a wiggle of unknown period found: each candidate period's ``gains`` and
-    the views as that period has them (``views_at``), and where a wiggle was taken, the period of
-    ``hz`` and the fit with it (``refit``)."""
+    """What the search for a wiggle of unknown period found: each candidate period's ``gains``
+    against the wiggle's ``price``, the views as each period has them (``views_at``) and as the fit
+    without a wiggle had them (``plain``), and where a wiggle was taken, the period of ``hz`` and
+    the fit with it (``refit``)."""
     evidence: dict[str, float]
     reason: str
     gains: np.ndarray
+    price: float
     views_at: list[list[bundle.Observations]]
+    plain: list[bundle.Observations]
     hz: float
     refit: _Fitted | None = None
 
@@ -655,7 +658,7 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
     k = int(np.argmax(gains))
     hz = float(WIGGLE_CANDIDATES_HZ[k])
     evidence = {"gain": round(float(gains[k]), 3), "price": round(float(price), 3)}
-    found = _WiggleSearch(evidence, "", gains, views_at, hz)
+    found = _WiggleSearch(evidence, "", gains, float(price), views_at, fitted.observations, hz)
     if gains[k] <= price or k in (0, len(gains) - 1):
         found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
                         + (f"below its price, {price:.1f}" if gains[k] <= price else
@@ -687,39 +690,51 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
     found.reason = (f"a wiggle in the depth of period {wiggly.wiggle_period:.3f} m (as of {hz / 1e6:.0f} MHz) "
                     f"chosen by the data: the score test's gain {gains[k]:.1f} against the price of its sine, "
                     f"cosine and period, {price:.1f}; amplitude {amplitude} (chi-square {z2:.1f} against the views' "
-                    "jackknife); the stated uncertainties include the fits at the other periods, as likely as "
-                    "the data make them")
+                    "jackknife)")
     say(found.reason)
     return found
 
 
-def _over_periods(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
+def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
                   options: CalibrationOptions, search: _WiggleSearch) -> bundle.Fit:
-    """The fit at the period the data chose, its covariance widened by how far the fits at the
-    other candidate periods lie, each weighted by its likelihood against the chosen (the score
-    test's gain as the likelihood ratio; a model average with the period unknown). Views that
-    cannot tell the period (near frontal, at one distance) leave the periods near-equally likely
-    and their fits a few standard deviations apart: at the chosen period alone, a third of such
-    results were trusted with the truth beyond 2 stated sigmas. Each is one solve from this fit,
-    on the views as the search planarized them for its period."""
-    weights = np.exp(0.5 * (search.gains - search.gains.max()))
-    weights /= weights.sum()
+    """The fit of the depth model chosen, its covariance widened by how far the fits of the others
+    lie: no wiggle, and a wiggle at each candidate period, each weighted by its likelihood (the
+    score test's gain less the wiggle's price, as the information criterion weighs them: a model
+    average over whether the depth wiggles and at what period). Near frontal, views cannot tell a
+    wiggle's slope over their distances from the focal length: with the wiggle not taken because
+    its gain fell just short of its price, or at the end of the periods looked for, or within its
+    views' jackknife, 6 % of such results were trusted with the truth 2 to 10 stated sigmas away;
+    with it taken, views that cannot tell the period leave the periods near-equally likely and
+    their fits a few standard deviations apart. A wiggle no ToF camera has (beyond MAX_WIGGLE_M)
+    is no candidate. Each is one solve from this fit, on the views as the search planarized them."""
     wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
+    log_weight = 0.5 * np.r_[0.0, search.gains - search.price]   # no wiggle, then each period
+    weights = np.exp(log_weight - log_weight.max())
+    weights /= weights.sum()
+    chosen = 0 if search.refit is None else 1 + int(np.argmax(search.gains))
     here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
-    spread = np.zeros_like(fit.covariance)
     state = fit.state.copy()
     state.bias[bias_model.TERMS["wiggle"]] = 0.0
-    for hz, weight, at_period in zip(WIGGLE_CANDIDATES_HZ, weights, search.views_at):
-        period = bias_model.wiggle_period(hz)
-        if weight < MIN_PERIOD_WEIGHT or np.isclose(period, options.wiggle_period):
+    inflation = observations[0].depth_inflation
+    total, spread = weights[chosen], np.zeros_like(fit.covariance)
+    for m, weight in enumerate(weights):
+        if m == chosen or weight < MIN_MODEL_WEIGHT:
             continue
-        views = [replace(o, depth_inflation=observations[0].depth_inflation) for o in at_period]
-        there = bundle.solve(views, state, options.depth_convention, free, loss=options.loss, wiggle_period=period)
+        if m == 0:
+            views, period, terms = search.plain, None, [t for t in free if t not in wiggle]
+        else:
+            views, terms = search.views_at[m - 1], sorted({*free, *wiggle})
+            period = bias_model.wiggle_period(WIGGLE_CANDIDATES_HZ[m - 1])
+        views = [replace(o, depth_inflation=inflation) for o in views]
+        there = bundle.solve(views, state, options.depth_convention, terms, loss=options.loss, wiggle_period=period)
+        if np.hypot(*there.state.bias[bias_model.TERMS["wiggle"]]) > MAX_WIGGLE_M:
+            continue
         # the wiggle's own terms mean another function at another period: only the rest compare
         delta = np.where(np.isin(fit.free_global, wiggle), 0.0,
                          np.r_[there.state.intrinsics, there.state.bias][fit.free_global] - here)
+        total += weight
         spread += weight * np.outer(delta, delta)
-    return replace(fit, covariance=fit.covariance + spread)
+    return replace(fit, covariance=fit.covariance + spread / total)
 
 
 def _joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say):
@@ -1132,8 +1147,15 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1, check.level ** 2)
         model.reasons.append(bowl)
         say(bowl)
-    if found_wiggle is not None and found_wiggle.refit is not None:
-        fit = _over_periods(observations, fit, free, options, found_wiggle)
+    if found_wiggle is not None:
+        alone = _std(fit)["fx"]
+        fit = _over_wiggles(observations, fit, free, options, found_wiggle)
+        if _std(fit)["fx"] > 1.1 * alone:
+            model.reasons.append(
+                f"fx's uncertainty is {_std(fit)['fx']:.2f} px, not the {alone:.2f} of the model chosen alone: it "
+                "includes the fits of the depth models the data leave likely (without a wiggle, and with one at "
+                "each period looked for), each as likely as the data make it")
+            say(model.reasons[-1])
     stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
