@@ -158,7 +158,7 @@ def test_a_near_frontal_wiggle_the_search_leaves_out_still_counts_in_fx_sigma():
     as the data make them. Over these eight seeds the wiggle is left out in five; counting only
     the fits at other periods when one was taken, two were trusted with the truth beyond 2
     stated sigmas (0.6 % off at 2.6 sigmas, 1.9 % off at 2.8); now none is, and every fx lies
-    within 2 of its sigmas (measured 0.2-1.4)."""
+    within 2 of its sigmas (measured 0.0-1.4)."""
     lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
     left_out = 0
     for seed in range(8):
