@@ -746,11 +746,11 @@ def _within_corners(alone: bundle.Fit, averaged: bundle.Fit, corner_fit: bundle.
     models' disagreement says less of the focal length than the corners do: 12 consecutive real
     Kinect v2 views were stated 15-20 px apart where the corners alone gave about a third of it."""
     spread = averaged.covariance - alone.covariance
+    corners = _focal(corner_fit)   # fx, fy, their standard deviations
     scale = 1.0
     for k in (0, 1):
         at = int(np.flatnonzero(alone.free_global == k)[0])
-        c = int(np.flatnonzero(corner_fit.free_global == k)[0])
-        cap = corner_fit.covariance[c, c] + (alone.state.intrinsics[k] - corner_fit.state.intrinsics[k]) ** 2
+        cap = corners[k + 2] ** 2 + (alone.state.intrinsics[k] - corners[k]) ** 2
         if spread[at, at] > 0 and alone.covariance[at, at] + spread[at, at] > cap:
             scale = min(scale, max(cap - alone.covariance[at, at], 0.0) / spread[at, at])
     return replace(averaged, covariance=alone.covariance + scale * spread)
