@@ -3,8 +3,10 @@
 ToF amplitude images are small (often < 300 px), noisy and of wide dynamic range, so the image
 is first tone-mapped by a robust percentile stretch, then OpenCV's sector-based detector
 (``findChessboardCornersSB``) is tried, with the classic detector plus ``cornerSubPix`` as the
-fallback. Every detection is checked corner by corner against the grid its neighbours predict,
-and its labelling is normalised so that it does not depend on which corner OpenCV started from.
+fallback. The board found is looked at again by the SB detector, cropped and upscaled until its
+squares are large enough for that detector to be unbiased. Every detection is checked corner by
+corner against the grid its neighbours predict, and its labelling is normalised so that it does
+not depend on which corner OpenCV started from.
 
 Pixel convention: OpenCV's, the centre of pixel (0, 0) is the coordinate (0, 0).
 """
@@ -25,6 +27,13 @@ UPSCALE_BELOW = 300
 # from where its 3x3 neighbourhood puts it marks the whole detection as bad.
 OUTLIER_FRACTION = 0.15
 OUTLIER_MIN_PX = 1.0
+# The SB detector's corners are biased where the squares it sees are small: on rendered views
+# with 6-11 px squares, seen 2x upscaled, it put the pattern 0.1 % too large, 0.3 % with a
+# lens's blur (sigma 1 px), and on the real Kinect v2 views that bias moved OpenCV's focal
+# length 2 % and its halves 2.6 % apart. With squares of this size or more it has none we can
+# measure, so a board found is looked at again, cropped and upscaled until its squares are.
+SB_SQUARE_PX = 32.0
+MAX_UPSCALE = 8
 
 # No CALIB_CB_NORMALIZE_IMAGE for SB: the image is already stretched, and its histogram
 # equalisation lifts the noise of a dark background until SB misses noisy boards (3 of 20
@@ -113,7 +122,8 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     """Corners and the reason behind the result, for logs and user feedback.
 
     ``refine``: sub-pixel refinement (cornerSubPix) of the classic detector's corners; the SB
-    detector's are always sub-pixel. ``upscale`` None means: let the SB detector see a 2x
+    detector's are always sub-pixel, and either detector's board is looked at again at squares of
+    SB_SQUARE_PX (``_refined``). ``upscale`` None means: let the SB detector see a 2x
     upscaled copy of images smaller than ``UPSCALE_BELOW`` first. A detection with any corner
     off its neighbours' grid is rejected (the next detector is tried), not repaired: a corner
     caught on glare or a wrong edge would bias the calibration more than a lost view.
@@ -128,13 +138,14 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     # SB corners are not passed through cornerSubPix: its ACCURACY mode is already sub-pixel.
     # cornerSubPix removes SB's small bias on rendered views but doubles the noise on the real
     # Kinect v2 views (0.13 -> 0.24 px RMS) and leaves their halves no closer (README, limitations).
-    corners = _detect_sb(gray, board, upscale)
+    corners, seen_at = _detect_sb(gray, board, upscale)
     if corners is None:
         reasons.append("SB detector found no board")
     else:
         bad = _grid_outliers(corners, board)
         if bad is None:
-            return Detection(_normalise_order(corners, board), "found by findChessboardCornersSB")
+            return _refined(stretched, _normalise_order(corners, board), board, seen_at,
+                            "found by findChessboardCornersSB")
         reasons.append(f"SB detection rejected: {bad}")
 
     found, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=_CLASSIC_FLAGS)
@@ -146,7 +157,7 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
             corners = _subpix(fine, corners, board)
         bad = _grid_outliers(corners, board)
         if bad is None:
-            return Detection(_normalise_order(corners, board), "found by findChessboardCorners")
+            return _refined(stretched, _normalise_order(corners, board), board, 1, "found by findChessboardCorners")
         reasons.append(f"classic detection rejected: {bad}")
     return Detection(None, f"no {board.cols}x{board.rows} board found: " + "; ".join(reasons))
 
@@ -169,18 +180,47 @@ def detect_corners(image: np.ndarray, board: Board, *, refine: bool = True) -> n
     return detect(image, board, refine=refine).corners
 
 
-def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> np.ndarray | None:
-    """SB corners, from the upscaled image first when asked (then the original)."""
+def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> tuple[np.ndarray | None, int]:
+    """SB corners, from the upscaled image first when asked (then the original), and the
+    upscaling they were found at."""
     if upscale:
         big = cv2.resize(gray, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
         found, pts = cv2.findChessboardCornersSB(big, board.pattern_size, flags=_SB_FLAGS)
         if found and pts is not None and len(pts) == board.n_corners:
             # cv2.resize aligns pixel areas: x_big = 2 x + 0.5.
-            return (pts.reshape(-1, 2).astype(np.float64) - 0.5) / 2.0
+            return (pts.reshape(-1, 2).astype(np.float64) - 0.5) / 2.0, 2
     found, pts = cv2.findChessboardCornersSB(gray, board.pattern_size, flags=_SB_FLAGS)
     if found and pts is not None and len(pts) == board.n_corners:
-        return pts.reshape(-1, 2).astype(np.float64)
-    return None
+        return pts.reshape(-1, 2).astype(np.float64), 1
+    return None, 1
+
+
+def _refined(stretched: np.ndarray, corners: np.ndarray, board: Board, seen_at: int, found: str) -> Detection:
+    """The board's corners from the SB detector on a crop upscaled until its squares are
+    SB_SQUARE_PX (at most MAX_UPSCALE times); ``corners`` where the detector first saw them
+    that large (``seen_at``: its upscaling), or where the second look fails or strays."""
+    grid = corners.reshape(board.rows, board.cols, 2)
+    spacing = _spacing(grid)
+    factor = int(min(MAX_UPSCALE, np.ceil(SB_SQUARE_PX / spacing)))
+    if factor <= seen_at:
+        return Detection(corners, found)
+    steps = np.r_[np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
+                  np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()]
+    margin = 2.0 * float(steps.max())   # the outer squares and a quiet zone beyond them
+    h, w = stretched.shape
+    x0, y0 = (max(int(np.floor(v - margin)), 0) for v in corners.min(axis=0))
+    x1, y1 = (min(int(np.ceil(v + margin)), n - 1) for v, n in zip(corners.max(axis=0), (w, h)))
+    crop = np.clip(stretched[y0:y1 + 1, x0:x1 + 1], 0, 255).astype(np.float32)
+    big = np.clip(np.rint(cv2.resize(crop, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)), 0, 255)
+    ok, pts = cv2.findChessboardCornersSB(big.astype(np.uint8), board.pattern_size, flags=_SB_FLAGS)
+    if not ok or pts is None or len(pts) != board.n_corners:
+        return Detection(corners, found)
+    # cv2.resize aligns pixel areas: x_big = factor x + (factor - 1) / 2
+    again = _normalise_order((pts.reshape(-1, 2).astype(np.float64) - (factor - 1) / 2) / factor + (x0, y0), board)
+    tolerance = max(OUTLIER_FRACTION * spacing, OUTLIER_MIN_PX)
+    if _grid_outliers(again, board) is not None or np.max(np.linalg.norm(again - corners, axis=1)) > tolerance:
+        return Detection(corners, found)
+    return Detection(again, f"{found}, its squares seen at {spacing * factor:.0f} px ({factor}x upscaled)")
 
 
 def _spacing(grid: np.ndarray) -> float:
