@@ -921,19 +921,39 @@ class _DepthCheck:
     reasons: list[str] = field(default_factory=list)
 
 
-def _corner_focal_spread(obj: list[np.ndarray], prepared: list[_Prepared], image_size: tuple[int, int],
-                         folds: int = CORNER_FOLDS) -> float:
-    """The corners-alone focal length's jackknife spread over ``folds`` groups of the views,
-    relative (inf where a fold cannot be calibrated)."""
-    fx = []
-    for keep in bundle.jackknife_folds(len(prepared), folds):
+def _corner_fold_focals(obj: list[np.ndarray], prepared: list[_Prepared],
+                        image_size: tuple[int, int]) -> np.ndarray | None:
+    """The corners-alone (OpenCV) fx and fy without each of CORNER_FOLDS groups of the views (a
+    row each), the folds ``bundle.jackknifed`` uses; None where a fold cannot be calibrated."""
+    focals = []
+    for keep in bundle.jackknife_folds(len(prepared), CORNER_FOLDS):
         try:
-            fx.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
-                                       image_size).intrinsics[0])
+            focals.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
+                                           image_size).intrinsics[:2])
         except CalibrationError:
-            return float("inf")
-    fx = np.array(fx)
-    return float(bundle.jackknife_spread(fx) / fx.mean())
+            return None
+    return np.array(focals)
+
+
+def _less_certain(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
+                  options: CalibrationOptions, corner_fit: bundle.Fit | None, obj: list[np.ndarray],
+                  prepared: list[_Prepared], image_size: tuple[int, int]) -> tuple[str, float, float] | None:
+    """The focal length (fx or fy) the depth leaves less certain than the corners alone, with both
+    standard deviations, each raised to its spread over folds of the views (``bundle.jackknifed``;
+    OpenCV on the same folds for the corners), or None."""
+    if corner_fit is None:
+        return None
+    s = _std(bundle.jackknifed(observations, fit, options.depth_convention, CORNER_FOLDS, free, options.loss))
+    ours = np.array([s["fx"], s["fy"]])
+    alone = np.array(_focal(corner_fit)[2:])
+    if np.all(ours <= alone):   # the corners' spread over folds can only raise theirs
+        return None
+    folds = _corner_fold_focals(obj, prepared, image_size)
+    if folds is None:
+        return None
+    alone = np.maximum(alone, bundle.jackknife_spread(folds))
+    k = int(np.argmax(ours / alone))
+    return (("fx", "fy")[k], float(ours[k]), float(alone[k])) if ours[k] > alone[k] else None
 
 
 def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
@@ -1004,7 +1024,9 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
     if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         # the corners' focal length can rest on a view or two (a real Kinect set moves it 2 %
         # with one view): their spread over folds of the views, not only their covariance
-        level_sigma = float(np.hypot(level_sigma, _corner_focal_spread(obj, prepared, image_size)))
+        folds = _corner_fold_focals(obj, prepared, image_size)
+        spread = np.inf if folds is None else float(bundle.jackknife_spread(folds[:, 0]) / folds[:, 0].mean())
+        level_sigma = float(np.hypot(level_sigma, spread))
     check.level = level if abs(level) > EXCESS_SIGMAS * level_sigma else 0.0
     if check.level and abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         check.scale = True
@@ -1134,28 +1156,39 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
     # Where the depth pulls the corners off their fit, its error is one the model does not explain
-    # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone
+    # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone; by
+    # the effect's size alone: 4 corners a view leave the corners-alone fit 2 degrees of freedom,
+    # which leave the F-test without power (a wiggle 17 times the corners' noise passed it, trusted
+    # 1.7 % off at 4 sigmas), and the depth yielding where it need not costs little. Where it leaves
+    # the focal length less certain over folds of the views than the corners alone, each view's
+    # depth has an error of its own the model does not explain: it falls until it does not.
     corner_noise = None if corner_fit is None else noise_per_dof(corner_fit.pixel_residuals,
                                                                  len(corner_fit.free_global))
-    full_weight = _pixel_noise(fit, model)
     inflation = 1.0
-    # by the effect's size alone: 4 corners a view leave the corners-alone fit 2 degrees of freedom,
-    # which leave the F-test without power (a wiggle 17 times the corners' noise passed it, trusted
-    # 1.7 % off at 4 sigmas), and the depth yielding where it need not costs little
-    while corner_noise is not None and inflation < MAX_DEPTH_INFLATION and corners_pulled(
-            _pixel_noise(fit, model), corner_noise, tested=False):
+
+    def why_yield(fit: bundle.Fit, free: list[int], model: Model, observations) -> str | None:
+        if corner_noise is not None and corners_pulled(_pixel_noise(fit, model), corner_noise, tested=False):
+            return (f"the corners fit worse with the depth at its full weight than alone "
+                    f"({_pixel_noise(fit, model)[0]:.3f} against {corner_noise[0]:.3f} px a degree of freedom")
+        worse = _less_certain(observations, fit, free, options, corner_fit, obj, prepared, image_size)
+        return None if worse is None else (f"the depth at its full weight left {worse[0]} less certain than the "
+                                           f"corners alone ({worse[1]:.2f} against {worse[2]:.2f} px, over folds of "
+                                           "the views")
+
+    full_weight = reason = why_yield(fit, free, model, observations)
+    while inflation < MAX_DEPTH_INFLATION and reason:
         inflation *= DEPTH_INFLATION_STEP
         lighter = [replace(o, depth_inflation=inflation) for o in observations]
         fit, free, chosen, depths, planes, observations = _fit(prepared, plane_samples, obj, lighter, start,
                                                                check.scale, options, say)
         model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
+        reason = why_yield(fit, free, model, observations)
     if inflation > 1:
         model.depth_inflation = inflation
         model.reasons.append(
-            f"the corners fit worse with the depth at its full weight than alone ({full_weight[0]:.3f} against "
-            f"{corner_noise[0]:.3f} px a degree of freedom; the depth says fx={depth_focal[0]:.1f} px): a depth "
-            f"error the model does not explain; its error is taken as {inflation:g} times its noise, where they fit "
-            f"about as well (at most {MAX_DEPTH_INFLATION:g})")
+            f"{full_weight}; the depth says fx={depth_focal[0]:.1f} px): a depth error the model does not explain; its "
+            f"error is taken as {inflation:g} times its noise, where the corners fit about as well and are no less "
+            f"certain (at most {MAX_DEPTH_INFLATION:g})")
         say(model.reasons[-1])
     bowl = _bowl_check(plane_samples, fit, convention, check.level) \
         if options.depth_bias == "auto" and options.wiggle_period is None else None
