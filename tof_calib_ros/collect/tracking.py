@@ -67,7 +67,8 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
                                f"every {WHOLE_IMAGE_EVERY} frames")
     try:
         found = locate(amplitude, board)
-        return detect(amplitude, board) if found.corners is None and thorough else found
+        # where the board is, not its accurate corners (accurate_detect): no second look
+        return detect(amplitude, board, second_look=False) if found.corners is None and thorough else found
     except CalibrationError as exc:
         return Detection(None, str(exc))
 

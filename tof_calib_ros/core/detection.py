@@ -118,12 +118,13 @@ def tone_map(image: np.ndarray) -> np.ndarray:
 
 
 def detect(image: np.ndarray, board: Board, *, refine: bool = True,
-           upscale: bool | None = None) -> Detection:
+           upscale: bool | None = None, second_look: bool = True) -> Detection:
     """Corners and the reason behind the result, for logs and user feedback.
 
     ``refine``: sub-pixel refinement (cornerSubPix) of the classic detector's corners; the SB
     detector's are always sub-pixel, and either detector's board is looked at again at squares of
-    SB_SQUARE_PX (``_refined``). ``upscale`` None means: let the SB detector see a 2x
+    SB_SQUARE_PX (``_refined``) unless ``second_look`` is False (a search that only needs to
+    know where the board is: it doubles the cost). ``upscale`` None means: let the SB detector see a 2x
     upscaled copy of images smaller than ``UPSCALE_BELOW`` first. A detection with any corner
     off its neighbours' grid is rejected (the next detector is tried), not repaired: a corner
     caught on glare or a wrong edge would bias the calibration more than a lost view.
@@ -144,8 +145,8 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     else:
         bad = _grid_outliers(corners, board)
         if bad is None:
-            return _refined(stretched, _normalise_order(corners, board), board, seen_at,
-                            "found by findChessboardCornersSB")
+            found = Detection(_normalise_order(corners, board), "found by findChessboardCornersSB")
+            return _refined(stretched, found, board, seen_at) if second_look else found
         reasons.append(f"SB detection rejected: {bad}")
 
     found, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=_CLASSIC_FLAGS)
@@ -157,7 +158,8 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
             corners = _subpix(fine, corners, board)
         bad = _grid_outliers(corners, board)
         if bad is None:
-            return _refined(stretched, _normalise_order(corners, board), board, 1, "found by findChessboardCorners")
+            found = Detection(_normalise_order(corners, board), "found by findChessboardCorners")
+            return _refined(stretched, found, board, 1) if second_look else found
         reasons.append(f"classic detection rejected: {bad}")
     return Detection(None, f"no {board.cols}x{board.rows} board found: " + "; ".join(reasons))
 
@@ -195,15 +197,16 @@ def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> tuple[np.ndarra
     return None, 1
 
 
-def _refined(stretched: np.ndarray, corners: np.ndarray, board: Board, seen_at: int, found: str) -> Detection:
+def _refined(stretched: np.ndarray, found: Detection, board: Board, seen_at: int) -> Detection:
     """The board's corners from the SB detector on a crop upscaled until its squares are
-    SB_SQUARE_PX (at most MAX_UPSCALE times); ``corners`` where the detector first saw them
+    SB_SQUARE_PX (at most MAX_UPSCALE times); ``found`` where the detector first saw them
     that large (``seen_at``: its upscaling), or where the second look fails or strays."""
+    corners = found.corners
     grid = corners.reshape(board.rows, board.cols, 2)
     spacing = _spacing(grid)
     factor = int(min(MAX_UPSCALE, np.ceil(SB_SQUARE_PX / spacing)))
     if factor <= seen_at:
-        return Detection(corners, found)
+        return found
     steps = np.r_[np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
                   np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()]
     margin = 2.0 * float(steps.max())   # the outer squares and a quiet zone beyond them
@@ -214,13 +217,13 @@ def _refined(stretched: np.ndarray, corners: np.ndarray, board: Board, seen_at: 
     big = np.clip(np.rint(cv2.resize(crop, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)), 0, 255)
     ok, pts = cv2.findChessboardCornersSB(big.astype(np.uint8), board.pattern_size, flags=_SB_FLAGS)
     if not ok or pts is None or len(pts) != board.n_corners:
-        return Detection(corners, found)
+        return found
     # cv2.resize aligns pixel areas: x_big = factor x + (factor - 1) / 2
     again = _normalise_order((pts.reshape(-1, 2).astype(np.float64) - (factor - 1) / 2) / factor + (x0, y0), board)
     tolerance = max(OUTLIER_FRACTION * spacing, OUTLIER_MIN_PX)
     if _grid_outliers(again, board) is not None or np.max(np.linalg.norm(again - corners, axis=1)) > tolerance:
-        return Detection(corners, found)
-    return Detection(again, f"{found}, its squares seen at {spacing * factor:.0f} px ({factor}x upscaled)")
+        return found
+    return Detection(again, f"{found.message}, its squares seen at {spacing * factor:.0f} px ({factor}x upscaled)")
 
 
 def _spacing(grid: np.ndarray) -> float:
