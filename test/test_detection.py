@@ -260,3 +260,29 @@ def test_quick_corners_agree_with_the_accurate_ones_in_the_same_order():
         assert quick is not None and accurate is not None
         assert np.sqrt(np.mean(np.sum((quick - accurate) ** 2, axis=1))) < 0.5
     assert locate(np.zeros((200, 200), np.uint8) + np.arange(200, dtype=np.uint8), SIM_BOARD).corners is None
+
+
+def test_a_located_board_sharpened_is_as_accurate_as_detected_and_never_relabelled():
+    """``sharpen`` (the second look alone, from a tracker's quick corners) gives the corners
+    ``detect`` gives, to the truth's accuracy; a location a square off (another labelling of the
+    grid) is refused, not sharpened into it."""
+    from tof_calib_ros.core.detection import locate, sharpen
+
+    cam, board = sim.pmd_camera(), Board(5, 7, 0.03)
+    errors = []
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        for rvec, tvec in sim.random_poses(cam, board, 5, rng, distance=(0.6, 1.0), max_tilt_deg=40):
+            frame = sim.render(cam, board, rvec, tvec, noise=sim.Noise(amplitude=0.003), rng=rng)
+            image = cv2.GaussianBlur(frame.amplitude.astype(np.float32), (0, 0), 1.0)
+            quick = locate(image, board).corners
+            assert quick is not None
+            sharp = sharpen(image, board, quick)
+            assert sharp.corners is not None and "upscaled" in sharp.message, sharp.message
+            detected = detect(image, board).corners
+            assert np.max(np.abs(sharp.corners - detected)) < 0.05
+            errors.append(sharp.corners - frame.corners)
+            grid = quick.reshape(board.rows, board.cols, 2)
+            shifted = (grid + (grid[:, 1:2] - grid[:, :1])).reshape(-1, 2)   # a square along the rows
+            assert sharpen(image, board, shifted).corners is None
+    assert np.sqrt(np.mean(np.concatenate(errors) ** 2)) < 0.06

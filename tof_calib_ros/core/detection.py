@@ -38,7 +38,13 @@ MAX_UPSCALE = 8
 # No CALIB_CB_NORMALIZE_IMAGE for SB: the image is already stretched, and its histogram
 # equalisation lifts the noise of a dark background until SB misses noisy boards (3 of 20
 # rendered 200x200 views with 0.5 % amplitude noise, 20 of 20 when upscaled; none without it).
-_SB_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+# The second look, on the board's crop, gives the corners kept, in ACCURACY mode: without it the
+# real Kinect v2 views' OpenCV fx moves 1.7 % (to 364 px) and their halves 2 % apart, even at
+# squares of 48-64 px. The first look only has to find the board: the exhaustive search first,
+# then, where that finds nothing, with ACCURACY too (60 % dearer), whose own upsampling finds
+# boards the first misses (20 of 59 frames of a moving board at 640x576).
+_FIND_FLAGS = (cv2.CALIB_CB_EXHAUSTIVE, cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+_ACCURATE_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
 _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 _DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
@@ -121,10 +127,10 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
            upscale: bool | None = None, second_look: bool = True) -> Detection:
     """Corners and the reason behind the result, for logs and user feedback.
 
-    ``refine``: sub-pixel refinement (cornerSubPix) of the classic detector's corners; the SB
-    detector's are always sub-pixel, and either detector's board is looked at again at squares of
-    SB_SQUARE_PX (``_refined``) unless ``second_look`` is False (a search that only needs to
-    know where the board is: it doubles the cost). ``upscale`` None means: let the SB detector see a 2x
+    ``refine``: sub-pixel refinement (cornerSubPix) of the classic detector's corners. Either
+    detector's board is looked at again by the SB detector in accuracy mode, at squares of
+    SB_SQUARE_PX (``_second_look``), unless ``second_look`` is False: a search that only needs to
+    know where the board is, whose corners are rougher. ``upscale`` None means: let the SB detector see a 2x
     upscaled copy of images smaller than ``UPSCALE_BELOW`` first. A detection with any corner
     off its neighbours' grid is rejected (the next detector is tried), not repaired: a corner
     caught on glare or a wrong edge would bias the calibration more than a lost view.
@@ -136,17 +142,19 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
         upscale = min(gray.shape) < UPSCALE_BELOW
     reasons = []
 
-    # SB corners are not passed through cornerSubPix: its ACCURACY mode is already sub-pixel.
+    # SB corners are not passed through cornerSubPix: the second look's ACCURACY mode is sub-pixel.
     # cornerSubPix removes SB's small bias on rendered views but doubles the noise on the real
     # Kinect v2 views (0.13 -> 0.24 px RMS) and leaves their halves no closer (README, limitations).
-    corners, seen_at = _detect_sb(gray, board, upscale)
+    # a search after a quicker one failed (second_look False) gains nothing from the exhaustive
+    # search alone: it found none of the 59 frames the quick search missed
+    corners = _detect_sb(gray, board, upscale, _FIND_FLAGS if second_look else _FIND_FLAGS[1:])
     if corners is None:
         reasons.append("SB detector found no board")
     else:
         bad = _grid_outliers(corners, board)
         if bad is None:
             found = Detection(_normalise_order(corners, board), "found by findChessboardCornersSB")
-            return _refined(stretched, found, board, seen_at) if second_look else found
+            return _sharpened(stretched, found, board) if second_look else found
         reasons.append(f"SB detection rejected: {bad}")
 
     found, raw = cv2.findChessboardCorners(gray, board.pattern_size, flags=_CLASSIC_FLAGS)
@@ -159,7 +167,7 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
         bad = _grid_outliers(corners, board)
         if bad is None:
             found = Detection(_normalise_order(corners, board), "found by findChessboardCorners")
-            return _refined(stretched, found, board, 1) if second_look else found
+            return _sharpened(stretched, found, board) if second_look else found
         reasons.append(f"classic detection rejected: {bad}")
     return Detection(None, f"no {board.cols}x{board.rows} board found: " + "; ".join(reasons))
 
@@ -182,48 +190,74 @@ def detect_corners(image: np.ndarray, board: Board, *, refine: bool = True) -> n
     return detect(image, board, refine=refine).corners
 
 
-def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> tuple[np.ndarray | None, int]:
-    """SB corners, from the upscaled image first when asked (then the original), and the
-    upscaling they were found at."""
-    if upscale:
-        big = cv2.resize(gray, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
-        found, pts = cv2.findChessboardCornersSB(big, board.pattern_size, flags=_SB_FLAGS)
-        if found and pts is not None and len(pts) == board.n_corners:
-            # cv2.resize aligns pixel areas: x_big = 2 x + 0.5.
-            return (pts.reshape(-1, 2).astype(np.float64) - 0.5) / 2.0, 2
-    found, pts = cv2.findChessboardCornersSB(gray, board.pattern_size, flags=_SB_FLAGS)
-    if found and pts is not None and len(pts) == board.n_corners:
-        return pts.reshape(-1, 2).astype(np.float64), 1
-    return None, 1
+def _detect_sb(gray: np.ndarray, board: Board, upscale: bool, flags: tuple[int, ...]) -> np.ndarray | None:
+    """Where the SB detector finds the board, with each of ``flags`` in turn, from the upscaled
+    image first when asked (then the original)."""
+    for f in flags:
+        for factor in (2, 1) if upscale else (1,):
+            corners = _sb_corners(gray, board, f, factor)
+            if corners is not None:
+                return corners
+    return None
 
 
-def _refined(stretched: np.ndarray, found: Detection, board: Board, seen_at: int) -> Detection:
-    """The board's corners from the SB detector on a crop upscaled until its squares are
-    SB_SQUARE_PX (at most MAX_UPSCALE times); ``found`` where the detector first saw them
-    that large (``seen_at``: its upscaling), or where the second look fails or strays."""
-    corners = found.corners
+def _sb_corners(image: np.ndarray, board: Board, flags: int, factor: int) -> np.ndarray | None:
+    """SB corners on ``image`` (0..255) upscaled ``factor`` times, in ``image``'s pixels."""
+    big = image if factor == 1 else cv2.resize(image, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)
+    if big.dtype != np.uint8:
+        big = np.clip(np.rint(big), 0, 255).astype(np.uint8)
+    found, pts = cv2.findChessboardCornersSB(big, board.pattern_size, flags=flags)
+    if not found or pts is None or len(pts) != board.n_corners:
+        return None
+    # cv2.resize aligns pixel areas: x_big = factor x + (factor - 1) / 2.
+    return (pts.reshape(-1, 2).astype(np.float64) - (factor - 1) / 2) / factor
+
+
+def sharpen(image: np.ndarray, board: Board, corners: np.ndarray) -> Detection:
+    """The accurate corners of a board already located (``corners``, in Board order, from a
+    quicker search): ``detect``'s second look without its first, which a stream's tracker has
+    already done. No corners where the second look fails or strays from ``corners``."""
+    again = _second_look(_stretch(image), np.asarray(corners, dtype=np.float64), board)
+    if again is None:
+        return Detection(None, "the second look at the board located there failed")
+    sharp, seen = again
+    return Detection(sharp, f"found where it was located, {seen}")
+
+
+def _sharpened(stretched: np.ndarray, found: Detection, board: Board) -> Detection:
+    """``found`` after the second look, or as it was, and said so, where that look fails."""
+    again = _second_look(stretched, found.corners, board)
+    if again is None:
+        return Detection(found.corners, f"{found.message}, not sharpened: the second look failed")
+    sharp, seen = again
+    return Detection(sharp, f"{found.message}, {seen}")
+
+
+def _second_look(stretched: np.ndarray, corners: np.ndarray, board: Board) -> tuple[np.ndarray, str] | None:
+    """The board's corners from the SB detector in accuracy mode on a crop upscaled until its
+    squares are SB_SQUARE_PX (at most MAX_UPSCALE times), else less upscaled (one of the real
+    Kinect v2 views is found only as it is), and how it saw them; None where every look fails or
+    strays from ``corners``."""
     grid = corners.reshape(board.rows, board.cols, 2)
     spacing = _spacing(grid)
-    factor = int(min(MAX_UPSCALE, np.ceil(SB_SQUARE_PX / spacing)))
-    if factor <= seen_at:
-        return found
+    factor = int(np.clip(np.ceil(SB_SQUARE_PX / spacing), 1, MAX_UPSCALE))
     steps = np.r_[np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(),
                   np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()]
-    margin = 2.0 * float(steps.max())   # the outer squares and a quiet zone beyond them
+    margin = 1.5 * float(steps.max())   # the outer squares and a quiet zone beyond them
     h, w = stretched.shape
     x0, y0 = (max(int(np.floor(v - margin)), 0) for v in corners.min(axis=0))
     x1, y1 = (min(int(np.ceil(v + margin)), n - 1) for v, n in zip(corners.max(axis=0), (w, h)))
     crop = np.clip(stretched[y0:y1 + 1, x0:x1 + 1], 0, 255).astype(np.float32)
-    big = np.clip(np.rint(cv2.resize(crop, None, fx=factor, fy=factor, interpolation=cv2.INTER_CUBIC)), 0, 255)
-    ok, pts = cv2.findChessboardCornersSB(big.astype(np.uint8), board.pattern_size, flags=_SB_FLAGS)
-    if not ok or pts is None or len(pts) != board.n_corners:
-        return found
-    # cv2.resize aligns pixel areas: x_big = factor x + (factor - 1) / 2
-    again = _normalise_order((pts.reshape(-1, 2).astype(np.float64) - (factor - 1) / 2) / factor + (x0, y0), board)
     tolerance = max(OUTLIER_FRACTION * spacing, OUTLIER_MIN_PX)
-    if _grid_outliers(again, board) is not None or np.max(np.linalg.norm(again - corners, axis=1)) > tolerance:
-        return found
-    return Detection(again, f"{found.message}, its squares seen at {spacing * factor:.0f} px ({factor}x upscaled)")
+    for f in dict.fromkeys((factor, min(factor, 2), 1)):
+        again = _sb_corners(crop, board, _ACCURATE_FLAGS, f)
+        if again is None:
+            continue
+        again = _normalise_order(again + (x0, y0), board)
+        if _grid_outliers(again, board) is None and np.max(np.linalg.norm(again - corners, axis=1)) <= tolerance:
+            return again, f"its squares seen at {spacing * f:.0f} px ({f}x upscaled)" if f > 1 else \
+                f"its squares seen at {spacing:.0f} px (not upscaled)"
+    return None
 
 
 def _spacing(grid: np.ndarray) -> float:
