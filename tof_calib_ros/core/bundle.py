@@ -398,23 +398,32 @@ def jackknife_spread(estimates: np.ndarray) -> np.ndarray:
     return np.sqrt((m - 1) / m * np.sum((estimates - estimates.mean(0)) ** 2, axis=0))
 
 
-def jackknifed(views: list[Observations], fit: Fit, convention: str, folds: int, estimated,
-               loss: str | None = None) -> Fit:
-    """The fit at the same estimate, each ``estimated`` global parameter's uncertainty raised to
-    its grouped jackknife spread where that is larger: refitted without each of ``folds`` groups
-    of the views, so that an error of each view's own (a real sensor's depth at that view's
-    distance and tilt) counts, which the covariance, built on errors independent between
-    corners, does not see (few real views' fx came out 2-5 of their sigmas apart)."""
+def fold_estimates(views: list[Observations], fit: Fit, convention: str, folds: int, estimated,
+                   loss: str | None = None) -> np.ndarray | None:
+    """Every global parameter (intrinsics, then bias; a row each) refitted from the fit's state
+    without each of ``folds`` groups of the views, ``estimated`` free: how far an error of each
+    view's own moves them. None with fewer than 3 folds."""
     kept = jackknife_folds(len(views), folds)
-    m = len(kept)
-    if m < 3:
-        return fit
+    if len(kept) < 3:
+        return None
     estimates = []
     for keep in kept:
         state = State(fit.state.intrinsics.copy(), fit.state.bias.copy(), fit.state.poses[keep].copy())
         sub = solve([views[i] for i in keep], state, convention, estimated, loss=loss, wiggle_period=fit.wiggle_period)
         estimates.append(np.r_[sub.state.intrinsics, sub.state.bias])
-    spread = jackknife_spread(np.array(estimates)[:, fit.free_global])
+    return np.array(estimates)
+
+
+def jackknifed(fit: Fit, estimates: np.ndarray | None, estimated) -> Fit:
+    """The fit at the same estimate, each ``estimated`` global parameter's uncertainty raised to
+    its grouped jackknife spread over ``estimates`` (``fold_estimates`` of the fit's views, at its
+    state) where that is larger: an error of each view's own (a real sensor's depth at that
+    view's distance and tilt) then counts, which the covariance, built on errors independent
+    between corners, does not see (few real views' fx came out 2-5 of their sigmas apart)."""
+    if estimates is None:
+        return fit
+    m = len(estimates)
+    spread = jackknife_spread(estimates[:, fit.free_global])
     std = np.sqrt(np.maximum(np.diag(fit.covariance), 1e-300))
     # raised only where the spread exceeds what the covariance predicts for it (chi-square with
     # m - 1 degrees, at JACKKNIFE_P): on views whose errors are the model's, it would only add noise

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import NamedTuple
 
 import cv2
@@ -675,7 +676,8 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
                         "the distances seen it is a depth scale (is the square size right, and the depth's units?)")
         say(found.reason)
         return found
-    stated = bundle.jackknifed(refit.observations, refit.fit, convention, CORNER_FOLDS, refit.free, options.loss)
+    stated = bundle.jackknifed(refit.fit, bundle.fold_estimates(refit.observations, refit.fit, convention, CORNER_FOLDS,
+                                                                refit.free, options.loss), refit.free)
     at = np.isin(stated.free_global, [N_INTRINSICS + t for t in bias_model.TERMS["wiggle"]])
     cov = stated.covariance[np.ix_(at, at)]
     z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
@@ -921,34 +923,62 @@ class _DepthCheck:
     reasons: list[str] = field(default_factory=list)
 
 
-def _corner_fold_focals(obj: list[np.ndarray], prepared: list[_Prepared],
-                        image_size: tuple[int, int]) -> np.ndarray | None:
-    """The corners-alone (OpenCV) fx and fy without each of CORNER_FOLDS groups of the views (a
-    row each), the folds ``bundle.jackknifed`` uses; None where a fold cannot be calibrated."""
-    focals = []
-    for keep in bundle.jackknife_folds(len(prepared), CORNER_FOLDS):
-        try:
-            focals.append(calibrate_opencv([obj[i] for i in keep], [prepared[i].corners for i in keep],
-                                           image_size).intrinsics[:2])
-        except CalibrationError:
-            return None
-    return np.array(focals)
+@dataclass
+class _CornersAlone:
+    """The corners-alone calibration the depth must not leave worse: its fit, and (computed once,
+    where asked) its pixel noise a degree of freedom and OpenCV's fx and fy over folds of the views."""
+
+    fit: bundle.Fit
+    obj: list[np.ndarray]
+    prepared: list[_Prepared]
+    image_size: tuple[int, int]
+
+    @cached_property
+    def noise(self) -> tuple[float, int]:
+        return noise_per_dof(self.fit.pixel_residuals, len(self.fit.free_global))
+
+    @cached_property
+    def fold_focals(self) -> np.ndarray | None:
+        """fx and fy without each of CORNER_FOLDS groups of the views (a row each), the folds
+        ``bundle.fold_estimates`` uses; None where a fold cannot be calibrated."""
+        focals = []
+        for keep in bundle.jackknife_folds(len(self.prepared), CORNER_FOLDS):
+            try:
+                focals.append(calibrate_opencv([self.obj[i] for i in keep], [self.prepared[i].corners for i in keep],
+                                               self.image_size).intrinsics[:2])
+            except CalibrationError:
+                return None
+        return np.array(focals)
 
 
-def _less_certain(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
-                  options: CalibrationOptions, corner_fit: bundle.Fit | None, obj: list[np.ndarray],
-                  prepared: list[_Prepared], image_size: tuple[int, int]) -> tuple[str, float, float] | None:
+def _why_yield(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int], model: Model,
+               options: CalibrationOptions, corners: _CornersAlone | None) -> tuple[str | None, np.ndarray | None]:
+    """Why the depth, at the weight ``observations`` give it, should yield to the corners (None
+    where it need not), and the fit's fold estimates where they were needed to tell."""
+    if corners is None:
+        return None, None
+    noise = _pixel_noise(fit, model)
+    if corners_pulled(noise, corners.noise, tested=False):
+        return (f"the corners fit worse with the depth at its full weight than alone ({noise[0]:.3f} against "
+                f"{corners.noise[0]:.3f} px a degree of freedom"), None
+    estimates = bundle.fold_estimates(observations, fit, options.depth_convention, CORNER_FOLDS, free, options.loss)
+    worse = _less_certain(fit, estimates, free, corners)
+    return (None if worse is None else
+            f"the depth at its full weight left {worse[0]} less certain than the corners alone ({worse[1]:.2f} "
+            f"against {worse[2]:.2f} px, over folds of the views"), estimates
+
+
+def _less_certain(fit: bundle.Fit, estimates: np.ndarray | None, free: list[int],
+                  corners: _CornersAlone) -> tuple[str, float, float] | None:
     """The focal length (fx or fy) the depth leaves less certain than the corners alone, with both
-    standard deviations, each raised to its spread over folds of the views (``bundle.jackknifed``;
-    OpenCV on the same folds for the corners), or None."""
-    if corner_fit is None:
-        return None
-    s = _std(bundle.jackknifed(observations, fit, options.depth_convention, CORNER_FOLDS, free, options.loss))
+    standard deviations, each raised to its spread over folds of the views (``estimates``, the
+    fit's; OpenCV on the same folds for the corners), or None."""
+    s = _std(bundle.jackknifed(fit, estimates, free))
     ours = np.array([s["fx"], s["fy"]])
-    alone = np.array(_focal(corner_fit)[2:])
+    alone = np.array(_focal(corners.fit)[2:])
     if np.all(ours <= alone):   # the corners' spread over folds can only raise theirs
         return None
-    folds = _corner_fold_focals(obj, prepared, image_size)
+    folds = corners.fold_focals
     if folds is None:
         return None
     alone = np.maximum(alone, bundle.jackknife_spread(folds))
@@ -957,8 +987,7 @@ def _less_certain(observations: list[bundle.Observations], fit: bundle.Fit, free
 
 
 def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | None],
-                 obj: list[np.ndarray], corner_fit: bundle.Fit | None, convention: str,
-                 image_size: tuple[int, int]) -> _DepthCheck:
+                 obj: list[np.ndarray], corners: _CornersAlone | None, convention: str) -> _DepthCheck:
     """What the corners can tell of the depth: the distance of each view from the corners alone
     (the board's size in the image, with the corners' own calibration, which the depth did not
     shape) against its distance from the depth.
@@ -972,8 +1001,9 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
     the depth for the rest; beyond it the verdict refuses. A ratio that follows the distance (a
     ToF wiggling error) is reported."""
     check = _DepthCheck()
-    if corner_fit is None:
+    if corners is None:
         return check
+    corner_fit = corners.fit
     K, D = split_intrinsics(corner_fit.state.intrinsics)
     bias = fit.state.bias
     ratio, sigma, dist = [], [], []
@@ -1024,7 +1054,7 @@ def _depth_check(prepared: list[_Prepared], fit: bundle.Fit, depths: list[np.nda
     if EXCESS_SIGMAS * level_sigma < abs(level) < MAX_CORNER_DEPTH_DISAGREEMENT:
         # the corners' focal length can rest on a view or two (a real Kinect set moves it 2 %
         # with one view): their spread over folds of the views, not only their covariance
-        folds = _corner_fold_focals(obj, prepared, image_size)
+        folds = corners.fold_focals
         spread = np.inf if folds is None else float(bundle.jackknife_spread(folds[:, 0]) / folds[:, 0].mean())
         level_sigma = float(np.hypot(level_sigma, spread))
     check.level = level if abs(level) > EXCESS_SIGMAS * level_sigma else 0.0
@@ -1144,7 +1174,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             options = replace(options, modulation_hz=found_wiggle.hz)
             fitted = found_wiggle.refit
     fit, free, model, depths, planes, observations = fitted
-    check = _depth_check(prepared, fit, depths, planes, obj, corner_fit, convention, image_size) \
+    corners = None if corner_fit is None else _CornersAlone(corner_fit, obj, prepared, image_size)
+    check = _depth_check(prepared, fit, depths, planes, obj, corners, convention) \
         if options.depth_bias == "auto" else _DepthCheck()
     for why in check.reasons:
         say(why)
@@ -1162,27 +1193,16 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # 1.7 % off at 4 sigmas), and the depth yielding where it need not costs little. Where it leaves
     # the focal length less certain over folds of the views than the corners alone, each view's
     # depth has an error of its own the model does not explain: it falls until it does not.
-    corner_noise = None if corner_fit is None else noise_per_dof(corner_fit.pixel_residuals,
-                                                                 len(corner_fit.free_global))
     inflation = 1.0
-
-    def why_yield(fit: bundle.Fit, free: list[int], model: Model, observations) -> str | None:
-        if corner_noise is not None and corners_pulled(_pixel_noise(fit, model), corner_noise, tested=False):
-            return (f"the corners fit worse with the depth at its full weight than alone "
-                    f"({_pixel_noise(fit, model)[0]:.3f} against {corner_noise[0]:.3f} px a degree of freedom")
-        worse = _less_certain(observations, fit, free, options, corner_fit, obj, prepared, image_size)
-        return None if worse is None else (f"the depth at its full weight left {worse[0]} less certain than the "
-                                           f"corners alone ({worse[1]:.2f} against {worse[2]:.2f} px, over folds of "
-                                           "the views")
-
-    full_weight = reason = why_yield(fit, free, model, observations)
+    reason, estimates = _why_yield(observations, fit, free, model, options, corners)
+    full_weight = reason
     while inflation < MAX_DEPTH_INFLATION and reason:
         inflation *= DEPTH_INFLATION_STEP
         lighter = [replace(o, depth_inflation=inflation) for o in observations]
         fit, free, chosen, depths, planes, observations = _fit(prepared, plane_samples, obj, lighter, start,
                                                                check.scale, options, say)
         model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
-        reason = why_yield(fit, free, model, observations)
+        reason, estimates = _why_yield(observations, fit, free, model, options, corners)
     if inflation > 1:
         model.depth_inflation = inflation
         model.reasons.append(
@@ -1211,7 +1231,9 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
                 "one at each period looked for), each as likely as the data make it, up to what the corners alone "
                 "leave of it")
             say(model.reasons[-1])
-    stated = bundle.jackknifed(observations, fit, convention, CORNER_FOLDS, free, options.loss)
+    if estimates is None:   # the folds of the loop's last fit, whose estimate the steps since leave as it was
+        estimates = bundle.fold_estimates(observations, fit, convention, CORNER_FOLDS, free, options.loss)
+    stated = bundle.jackknifed(fit, estimates, free)
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
