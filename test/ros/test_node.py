@@ -50,8 +50,8 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     deadline = time.monotonic() + CALIBRATE_TIMEOUT_S
     answers = []
     while True:
-        resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=START_TIMEOUT_S,
-                            procs=procs, resend_after=RESEND_S)
+        resp = spinner.call(Trigger, "/calibration_node/calibrate", timeout=CALIBRATE_TIMEOUT_S,
+                            procs=procs, resend_after=RESEND_S, busy=calibrating)
         answers.append(resp.message)
         if resp.success:
             break
