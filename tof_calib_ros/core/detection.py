@@ -145,9 +145,7 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     # SB corners are not passed through cornerSubPix: the second look's ACCURACY mode is sub-pixel.
     # cornerSubPix removes SB's small bias on rendered views but doubles the noise on the real
     # Kinect v2 views (0.13 -> 0.24 px RMS) and leaves their halves no closer (README, limitations).
-    # a search after a quicker one failed (second_look False) gains nothing from the exhaustive
-    # search alone: it found none of the 59 frames the quick search missed
-    corners = _detect_sb(gray, board, upscale, _FIND_FLAGS if second_look else _FIND_FLAGS[1:])
+    corners = _detect_sb(gray, board, upscale)
     if corners is None:
         reasons.append("SB detector found no board")
     else:
@@ -190,10 +188,10 @@ def detect_corners(image: np.ndarray, board: Board, *, refine: bool = True) -> n
     return detect(image, board, refine=refine).corners
 
 
-def _detect_sb(gray: np.ndarray, board: Board, upscale: bool, flags: tuple[int, ...]) -> np.ndarray | None:
-    """Where the SB detector finds the board, with each of ``flags`` in turn, from the upscaled
+def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> np.ndarray | None:
+    """Where the SB detector finds the board, with each of _FIND_FLAGS in turn, from the upscaled
     image first when asked (then the original)."""
-    for f in flags:
+    for f in _FIND_FLAGS:
         for factor in (2, 1) if upscale else (1,):
             corners = _sb_corners(gray, board, f, factor)
             if corners is not None:
