@@ -56,11 +56,12 @@ def test_the_depth_model_inverts_with_a_wiggle(convention):
     np.testing.assert_allclose(depth_bias.true_depth(bias, reported, u, period=1.87), depth, atol=1e-7)
 
 
-def test_a_depth_scale_left_out_is_carried_into_the_focal_length_it_moves():
+def test_a_depth_scale_left_out_is_carried_at_the_datas_own_doubt_of_it():
     """A depth scale the model leaves out moves the depth-aided fx by about as much (the fit
-    trusts the depth's scale), whatever the tilts. The fit's own uncertainty cannot see it, nor the data's
-    with the scale free (it is about the truth, not the fit); widened with the scale's variance
-    at the scale's square, fx's stated uncertainty covers the move."""
+    trusts the depth's scale), whatever the tilts. Widened by the scale, fx's uncertainty is the
+    fit's with the scale free, at the same estimate: the data's own doubt of the scale, about the
+    truth and not the fit, which does not cover a 3 % scale (where the views' depth bows by
+    amounts that differ, the pipeline fits the scale instead: ``_bowl_check``)."""
     rng = np.random.default_rng(1)
     board = Board(6, 5, 0.05)
     obj = board.object_points()
@@ -76,8 +77,9 @@ def test_a_depth_scale_left_out_is_carried_into_the_focal_length_it_moves():
                        [0, 1, 2, 3, N_INTRINSICS])
     moved = fit.state.intrinsics[0] - truth[0]
     assert abs(moved) > 0.5 * scale * truth[0] and abs(moved) > 10 * fit.covariance[0, 0] ** 0.5
-    free = bundle.widened(views, fit, "z", N_INTRINSICS + 1)   # the scale's variance from the data alone
-    wide = bundle.widened(views, fit, "z", N_INTRINSICS + 1, scale ** 2)
-    assert wide.covariance[-1, -1] == pytest.approx(max(scale ** 2, free.covariance[-1, -1]))
-    # the data alone fix the scale to 0.9 %, about the truth: the fit at scale 0 lies beyond that
-    assert free.covariance[0, 0] ** 0.5 < abs(moved) / 2 < wide.covariance[0, 0] ** 0.5 < 2 * scale * truth[0]
+    wide = bundle.widened(views, fit, "z", N_INTRINSICS + 1)
+    freed = bundle.solve(views, fit.state, "z", [0, 1, 2, 3, N_INTRINSICS, N_INTRINSICS + 1])
+    assert wide.state is fit.state and list(wide.free_global) == list(freed.free_global)
+    assert wide.covariance[0, 0] == pytest.approx(freed.covariance[0, 0], rel=0.2)
+    assert abs(freed.state.intrinsics[0] - truth[0]) < 3 * freed.covariance[0, 0] ** 0.5   # about the truth
+    assert 3 * fit.covariance[0, 0] ** 0.5 < wide.covariance[0, 0] ** 0.5 < abs(moved) / 2

@@ -65,8 +65,8 @@ def test_few_views_fit_their_corners_and_depth(few):
         assert ours.pixel_rms < 0.3 and ours.depth_rms < 0.01
 
 
-@pytest.mark.xfail(strict=True, reason="the depth's 2 % scale: few views rest fx on it (measured: median 2.3 % "
-                                       "from the reference, OpenCV 1.3 %)")
+@pytest.mark.xfail(strict=True, reason="a few views cannot see the depth's 2 % scale and rest fx on it (kinect_real: "
+                                       "median 0.95-2.3 % from the reference, OpenCV 0.96-2.35 %)")
 def test_few_views_agree_with_the_all_view_reference_better_than_opencv(few, reference):
     ours_err = [_focal_error(ours, reference) for ours, _ in few]
     trad_err = [_focal_error(trad, reference) for _, trad in few]
@@ -103,8 +103,24 @@ def test_all_views_take_the_depth_scale_the_corners_see_and_agree_with_opencv(ou
     assert np.all(np.abs(apart) < 0.003), apart
 
 
-@pytest.mark.xfail(strict=True, reason="the depth's 2 % scale: the odd half does not see it and rests fx on it "
-                                       "(measured: halves 2.5 % apart, the odd half 363.2 +- 0.9 trusted)")
+def test_the_odd_half_takes_a_scale_from_its_bows_and_is_not_trusted_off_the_even_views(views):
+    """The odd views' level (-0.8 +- 0.5 %) is under the depth check's 2 sigmas, but their depth
+    bows off its planes by amounts that differ between views (from -934 to +52 mm): a depth error
+    over distance, whose slope is a scale. Resting on the depth's scale the odd half was trusted
+    at 363.2 +- 0.9 px, 1.5 % and 3.8 sigmas of the difference below OpenCV on the even views,
+    which share none of its views (368.8 +- 1.2); with the scale, 371.3 +- 4.5 (0.7 % above),
+    refused as poorly constrained."""
+    odd = calibrate(views[1::2], BOARD)
+    reference = calibrate(views[0::2], BOARD, method="traditional")
+    assert "scale" in odd.model.depth_bias, odd.model.reasons
+    assert any("between the views" in r and "a depth scale term" in r for r in odd.model.reasons), odd.model.reasons
+    assert abs(odd.K[0, 0] / reference.K[0, 0] - 1) < 0.01, (odd.K[0, 0], reference.K[0, 0])
+    z = (odd.K[0, 0] - reference.K[0, 0]) / np.hypot(odd.std["fx"], reference.std["fx"])
+    assert not odd.ok or abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: halves 0.19 % apart in fx, 0.34 % in fy (the odd half takes the "
+                                       "scale from its bows, 371.3 +- 4.5, refused as poorly constrained)")
 def test_the_halves_agree_within_0_3_percent(views, even):
     odd = calibrate(views[1::2], BOARD)
     apart = np.diag(odd.K)[:2] / np.diag(even.K)[:2] - 1

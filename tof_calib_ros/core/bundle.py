@@ -432,17 +432,12 @@ def jackknifed(fit: Fit, estimates: np.ndarray | None, estimated) -> Fit:
     return replace(fit, covariance=fit.covariance * np.outer(gain, gain))
 
 
-def widened(views: list[Observations], fit: Fit, convention: str, term: int, variance: float = 0.0) -> Fit:
+def widened(views: list[Observations], fit: Fit, convention: str, term: int) -> Fit:
     """The fit at the same estimate, with the uncertainty of a ``term`` it leaves out (at its value,
-    within its prior) carried into the covariance, and that term's variance at least ``variance``
-    (what other evidence leaves of it), along the way the estimate would move with it: for a term
-    the data may hold but cannot fix."""
+    within its prior) carried into the covariance: for a term the data may hold but cannot fix."""
     problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, term], True,
                       fit.weights, wiggle_period=fit.wiggle_period)
     cov, _ = _covariance(problem, fit.state, len(views), True)
-    if variance > cov[-1, -1] > 0:   # the term is the last free parameter
-        along = cov[:, -1] / cov[-1, -1]
-        cov = cov + (variance - cov[-1, -1]) * np.outer(along, along)
     return replace(fit, covariance=cov, free_global=problem.free_global)
 
 
