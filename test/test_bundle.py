@@ -14,7 +14,7 @@ def test_jacobian_matches_finite_differences(convention, period):
     board = Board(4, 3, 0.05)
     obj = board.object_points()
     state = bundle.State(np.array([300.0, 290.0, 160.0, 120.0, -0.2, 0.05, 0.001, -0.001, 0.01]),
-                         np.array([0.02, 0.01, 0.03, -0.02, 0.012, -0.008]),
+                         np.array([0.02, 0.01, 0.03, -0.02, 0.012, -0.008, 0.015]),
                          np.array([[0.1, -0.2, 0.05, -0.1, -0.05, 0.8], [-0.2, 0.1, 0.0, -0.05, 0.0, 1.1]]))
     def wiggle():   # a plane's share of it, and what the depth off the plane says of it
         if period is None:
@@ -22,10 +22,12 @@ def test_jacobian_matches_finite_differences(convention, period):
         a = rng.normal(0, 1e3, (3, 2))
         return bundle.WiggleShape(rng.normal(0, 0.01, (12, 2)), a.T @ a, rng.normal(0, 10, 2))
 
-    views = [bundle.Observations(obj, rng.uniform(100, 200, (12, 2)), rng.uniform(0.7, 1.2, 12), wiggle=wiggle())
+    views = [bundle.Observations(obj, rng.uniform(100, 200, (12, 2)), rng.uniform(0.7, 1.2, 12), wiggle=wiggle(),
+                                 radial=bundle.RadialShape(rng.uniform(1e4, 1e5), rng.normal(0, 100),
+                                                           rng.normal(0, 0.05, 12), 0.01))
              for _ in range(2)]
     views[1].depth[3] = np.nan  # a corner without depth
-    free = np.arange(13 if period is None else 15)   # the wiggle's terms with its period
+    free = np.r_[np.arange(13 if period is None else 15), bundle.RADIAL]   # the wiggle's terms with its period
     problem = bundle.Problem(views, convention, np.array([0.5, 0.2]), np.array([0.01, 0.003]), free,
                              wiggle_period=period)
     x = problem.pack(state)
@@ -50,7 +52,7 @@ def test_the_depth_model_inverts_with_a_wiggle(convention):
     if convention == "radial":
         u /= np.linalg.norm(u, axis=1, keepdims=True)
     depth = rng.uniform(0.5, 4.0, 50)
-    bias = np.array([0.025, 0.01, 0.02, -0.01, 0.012, -0.009])
+    bias = np.array([0.025, 0.01, 0.02, -0.01, 0.012, -0.009, 0.03])
     reported = depth_bias.measured(bias, depth, u * depth[:, None], period=1.87)
     assert np.ptp(reported - depth_bias.measured(bias, depth, u * depth[:, None])) > 0.01   # the wiggle is there
     np.testing.assert_allclose(depth_bias.true_depth(bias, reported, u, period=1.87), depth, atol=1e-7)

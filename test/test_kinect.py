@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate
+from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.detection import detect_corners
 
 BOARD = Board(5, 7, 0.03)
@@ -59,9 +60,15 @@ def _focal_error(result, reference) -> float:
     return float(np.mean(np.abs(np.diag(result.K)[:2] / np.diag(reference.K)[:2] - 1)))
 
 
+def _offset_on_the_axis(result) -> float:
+    """The depth's offset on the optical axis: the z offset and the radial offset, which are one
+    there and which a few views' bows share between them."""
+    return float(result.depth_bias[0] + result.depth_bias[depth_bias.TERMS["radial"][0]])
+
+
 def test_few_views_fit_their_corners_and_depth(few):
     for ours, _ in few:   # 16-bit millimetre depth, as the driver gives it
-        assert 0.005 < ours.depth_offset < 0.035
+        assert 0.005 < _offset_on_the_axis(ours) < 0.035, (ours.depth_bias, ours.model.depth_bias)
         assert ours.pixel_rms < 0.3 and ours.depth_rms < 0.01
 
 
@@ -119,8 +126,6 @@ def test_the_odd_half_takes_a_scale_from_its_bows_and_is_not_trusted_off_the_eve
     assert not odd.ok or abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z)
 
 
-@pytest.mark.xfail(strict=True, reason="measured: halves 0.19 % apart in fx, 0.34 % in fy (the odd half takes the "
-                                       "scale from its bows, 371.3 +- 4.5, refused as poorly constrained)")
 def test_the_halves_agree_within_0_3_percent(views, even):
     odd = calibrate(views[1::2], BOARD)
     apart = np.diag(odd.K)[:2] / np.diag(even.K)[:2] - 1

@@ -200,7 +200,7 @@ def test_the_depth_off_its_plane_measures_a_curved_term_without_bias():
             depth = reads + rng.normal(0, 0.01, len(u))
             plane = fit_plane_to(u, depth, pixels, black)
             # the basis at the depth without its noise, the wiggle taken out as the pipeline does
-            at = depth_bias.true_depth(np.r_[0, 0, 0, 0, w], smoothed(plane, u, depth), u, period)
+            at = depth_bias.true_depth(np.r_[0, 0, 0, 0, w, 0], smoothed(plane, u, depth), u, period)
             basis = depth_bias.wiggle_basis(period, at, at * np.linalg.norm(u, axis=1))
             i, m = off_plane(plane, u, depth, black, basis)
             info, moment = info + i, moment + m

@@ -71,6 +71,12 @@ def test_the_wiggle_term_is_refused_without_the_modulation_frequency(capsys):
     assert calibration_options(defaults() | {"depth.modulation_mhz": 20.0})["modulation_hz"] == 20e6
 
 
+def test_the_radial_term_is_refused_for_radial_depth():
+    """An offset in the light's path is the depth offset where the depth is the light's path."""
+    assert "the radial term is for z-depth" in refusal({"depth.bias": "offset+radial", "depth.convention": "radial"})
+    assert refusal({"depth.bias": "offset+radial", "depth.convention": "z"}) is None
+
+
 def test_the_settings_reach_calibrate_and_the_collector():
     values = defaults() | {"calibration.loss": "huber", "depth.bias": "offset+tilt", "views.max": 30}
     assert calibration_options(values) == {"depth_convention": "z", "depth_bias": "offset+tilt", "distortion": "auto",

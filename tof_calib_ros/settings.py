@@ -93,7 +93,8 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
     Setting("depth.scale", 0.001, "metres per count of integer (16UC1) depth; 0.001: millimetres",
             flag="--depth-scale", low=1e-6, high=10.0),
     Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, and "
-            "tilt and wiggle where the data call for them), none, or offset, scale, tilt, wiggle joined by +",
+            "tilt, wiggle and radial offset where the data call for them), none, or offset, scale, tilt, wiggle, "
+            "radial joined by + (radial: z-depth only)",
             flag="--depth-bias", check=_depth_model),
     Setting("depth.modulation_mhz", 0.0, "the ToF camera's modulation frequency, MHz: given, the depth model always "
             "estimates a wiggling error of period c / (8 f) (1.87 m at 20 MHz); 0: not known, the data choose the "
@@ -135,7 +136,7 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
 
 
 # Settings checked together: a change to one is judged with the other's value.
-LINKED = (("views.min", "views.max"), ("depth.bias", "depth.modulation_mhz"))
+LINKED = (("views.min", "views.max"), ("depth.bias", "depth.modulation_mhz", "depth.convention"))
 
 
 def refusal(values: Mapping[str, Any]) -> str | None:
@@ -151,6 +152,13 @@ def refusal(values: Mapping[str, Any]) -> str | None:
             CalibrationOptions(depth_bias=bias, modulation_hz=_modulation_hz(mhz))
         except CalibrationError as exc:
             return f"depth.bias {bias!r} with depth.modulation_mhz {mhz}: {exc}"
+    convention = values.get("depth.convention")
+    if bias is not None and convention is not None:
+        try:
+            CalibrationOptions(depth_convention=convention, depth_bias=bias,
+                               modulation_hz=None if mhz is None else _modulation_hz(mhz))
+        except CalibrationError as exc:
+            return f"depth.bias {bias!r} with depth.convention {convention!r}: {exc}"
     lo, hi = values.get("views.min"), values.get("views.max")
     if lo is not None and hi is not None and lo > hi:
         return f"views.min ({lo}) must not exceed views.max ({hi}): calibration could never start"

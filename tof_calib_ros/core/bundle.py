@@ -1,7 +1,8 @@
 """The joint Levenberg-Marquardt over pixel and depth residuals (the paper's Eq. 8).
 
 Parameters: the intrinsics ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``, the depth bias
-``[offset, scale, tilt_x, tilt_y, wiggle_sin, wiggle_cos]`` (see depth_bias) and one pose ``[rvec, tvec]`` per view.
+``[offset, scale, tilt_x, tilt_y, wiggle_sin, wiggle_cos, radial]`` (see depth_bias) and one pose
+``[rvec, tvec]`` per view.
 Each view's pixel and depth residuals are divided by that view's standard deviations, so
 that millimetres and pixels can be added. The Jacobian is analytic and block-sparse: a pose
 touches only its own view's rows. So the normal equations are solved as in bundle
@@ -20,6 +21,7 @@ from .camera import N_INTRINSICS, depth_of, project, transform_views
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
 WIGGLE = [N_INTRINSICS + k for k in depth_bias.TERMS["wiggle"]]
+RADIAL = N_INTRINSICS + depth_bias.TERMS["radial"][0]
 RAYLEIGH_MEDIAN = np.sqrt(2 * np.log(2))  # median length of a 2-D Gaussian residual, in sigmas
 UNCONSTRAINED = 1e-12  # relative eigenvalue below which the views do not constrain a combination
 # The least noise the uncertainties assume (pixels, metres): what a corner detector and a
@@ -53,6 +55,22 @@ class WiggleShape:
 
 
 @dataclass
+class RadialShape:
+    """A view's depth on a radial offset, as WiggleShape on the wiggle. The plane was fitted to
+    the depth with a radial offset ``at`` taken out, so it keeps only the planar part of the rest:
+    ``curve`` (N,) is how far the offset's term at each corner lies off it, a unit of offset
+    beyond ``at`` moving a corner depth read off the plane by the term less this.
+    ``information`` and ``moment``: what the samples' depth off the plane says of the offset
+    (planarize.off_plane), the moment given as the depth before ``at`` was taken out would give
+    it, so that the offset's estimate is moment / information."""
+
+    information: float
+    moment: float
+    curve: np.ndarray
+    at: float = 0.0
+
+
+@dataclass
 class Observations:
     """One view's data: board points, measured pixels, measured depth (NaN where missing).
 
@@ -62,7 +80,8 @@ class Observations:
     (3 for a plane), so that a systematic depth error over a view is not counted once per corner.
     ``wiggle``: where the depth model has a wiggle, what the view's depth says of it (WiggleShape).
     ``depth_inflation``: how many times its noise the depth's error is taken to be, where the
-    depth pulls the corners off their fit by an error the model does not explain."""
+    depth pulls the corners off their fit by an error the model does not explain.
+    ``radial``: what the view's depth says of a radial offset (RadialShape; z-depth only)."""
 
     object_points: np.ndarray
     pixels: np.ndarray
@@ -71,6 +90,7 @@ class Observations:
     depth_dof: float | None = None
     wiggle: WiggleShape | None = None
     depth_inflation: float = 1.0
+    radial: RadialShape | None = None
 
 
 @dataclass
@@ -131,7 +151,12 @@ class Problem:
         self.depth = np.concatenate([v.depth for v in views])
         self.wiggle_curve = np.concatenate([np.zeros((len(v.pixels), 2)) if v.wiggle is None
                                             else v.wiggle.curve for v in views])
+        self.radial_curve = np.concatenate([np.zeros(len(v.pixels)) if v.radial is None else v.radial.curve
+                                            for v in views])
+        self.radial_at = np.concatenate([np.full(len(v.pixels), 0.0 if v.radial is None else v.radial.at)
+                                         for v in views])
         self.wiggle_rows = _wiggle_rows(views) if set(WIGGLE) <= set(self.free_global.tolist()) else None
+        self.radial_row = _radial_row(views) if RADIAL in self.free_global.tolist() else None
         self.view = np.concatenate([np.full(len(v.pixels), j) for j, v in enumerate(views)])
         w = np.sqrt(np.concatenate(weights)) if weights else np.ones(len(self.view))
         self.has_depth = np.isfinite(self.depth)
@@ -167,7 +192,8 @@ class Problem:
         d, dd = depth_of(X, self.convention)
         dpix = pr.pixels - self.pixels
         ddep = depth_bias.measured(state.bias, d, X, self.wiggle_period) - self.depth \
-            - self.wiggle_curve @ state.bias[depth_bias.TERMS["wiggle"]]
+            - self.wiggle_curve @ state.bias[depth_bias.TERMS["wiggle"]] \
+            - self.radial_curve * (state.bias[RADIAL - N_INTRINSICS] - self.radial_at)
         if not jac:
             return dpix, ddep, None, None
         n = len(X)
@@ -175,16 +201,20 @@ class Problem:
         jp[:, :, :4] = pr.d_k
         jp[:, :, 4:9] = pr.d_dist
         jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
-        _, scale, tx, ty, ws, wc = state.bias
+        _, scale, tx, ty, ws, wc, radial = state.bias
         jd = np.zeros((n, N_GLOBAL + 6))
         r = np.linalg.norm(X, axis=1)
         jd[:, N_INTRINSICS:N_GLOBAL] = np.column_stack(
-            [np.ones(n), d, X[:, 0], X[:, 1], depth_bias.wiggle_basis(self.wiggle_period, d, r) - self.wiggle_curve])
+            [np.ones(n), d, X[:, 0], X[:, 1], depth_bias.wiggle_basis(self.wiggle_period, d, r) - self.wiggle_curve,
+             d / r - self.radial_curve])
         grad = (1 + scale) * dd + np.array([tx, ty, 0.0])
-        if self.wiggle_period is not None:   # the wiggle f(r) d / r moves with the point too
+        # the radial term and the wiggle, f(r) d / r, move with the point too
+        f, df = np.full(n, radial), np.zeros(n)
+        if self.wiggle_period is not None:
             k = 2 * np.pi / self.wiggle_period
-            f = ws * np.sin(k * r) + wc * np.cos(k * r)
+            f = f + ws * np.sin(k * r) + wc * np.cos(k * r)
             df = k * (ws * np.cos(k * r) - wc * np.sin(k * r))
+        if self.wiggle_period is not None or radial:
             grad = grad + ((df * d / r ** 2 - f * d / r ** 3)[:, None] * X + (f / r)[:, None] * dd)
         jd[:, N_GLOBAL:] = np.einsum("nj,njk->nk", grad, dX)
         return dpix, ddep, jp, jd
@@ -197,19 +227,22 @@ class Problem:
         prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
                           for i in self.priors])
         M, c = self.wiggle_rows if self.wiggle_rows is not None else (np.zeros((0, 2)), np.zeros(0))
+        a, m = self.radial_row if self.radial_row is not None else (np.zeros(0), np.zeros(0))
         r = np.concatenate([(dpix * self.pixel_scale[:, None]).ravel(),
                             ddep[self.has_depth] * self.depth_scale, prior,
-                            M @ state.bias[depth_bias.TERMS["wiggle"]] - c])
+                            M @ state.bias[depth_bias.TERMS["wiggle"]] - c, a * state.bias[RADIAL - N_INTRINSICS] - m])
         if not jac:
             return r, None
         rows = np.concatenate([(jp * self.pixel_scale[:, None, None]).reshape(-1, N_GLOBAL + 6),
                                jd[self.has_depth] * self.depth_scale[:, None]])
         free = list(self.free_global)
-        alone = np.zeros((len(self.priors) + len(M), len(free)))
+        alone = np.zeros((len(self.priors) + len(M) + len(a), len(free)))
         for k, i in enumerate(self.priors):
             alone[k, free.index(i)] = 1.0 / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
         if len(M):
-            alone[len(self.priors):, [free.index(i) for i in WIGGLE]] = M
+            alone[len(self.priors):len(self.priors) + len(M), [free.index(i) for i in WIGGLE]] = M
+        if len(a):
+            alone[-1, free.index(RADIAL)] = a[0]
         view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth], np.zeros(len(alone), dtype=int)])
         g = np.vstack([rows[:, self.free_global], alone])
         pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
@@ -228,6 +261,17 @@ def _wiggle_rows(views: list[Observations]) -> tuple[np.ndarray, np.ndarray] | N
     e, V = np.linalg.eigh(info)
     e = np.maximum(e, UNCONSTRAINED * max(e.max(), 1e-300))
     return np.sqrt(e)[:, None] * V.T, (V.T @ moment) / np.sqrt(e)
+
+
+def _radial_row(views: list[Observations]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(a, m) with (a b - m)^2 the cost, up to a constant, of a radial offset ``b`` against the
+    views' depth off their planes (at each view's depth inflation, as its corner depths)."""
+    shapes = [(v.radial, v.depth_inflation) for v in views if v.radial is not None]
+    if not shapes:
+        return None
+    info = max(sum(s.information / k ** 2 for s, k in shapes), 1e-300)
+    moment = sum(s.moment / k ** 2 for s, k in shapes)
+    return np.array([np.sqrt(info)]), np.array([moment / np.sqrt(info)])
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """The ToF depth error model estimated alongside the intrinsics (beyond the paper).
 
     measured = (1 + scale) * depth + offset + tilt_x * X + tilt_y * Y
-               + (wiggle_sin * sin(2 pi r / period) + wiggle_cos * cos(2 pi r / period)) * depth / r
+               + (radial + wiggle_sin * sin(2 pi r / period) + wiggle_cos * cos(2 pi r / period)) * depth / r
 
 ``offset`` is the systematic range offset of real ToF cameras (about 25 mm on a Kinect v2);
 ``scale`` a modulation-frequency error; ``tilt`` a depth axis not quite along the optical
@@ -10,7 +10,10 @@ like to first order. The wiggling term is the periodic error of a continuous-wav
 (Lindner and Kolb): a function of the light's path, the radial distance ``r``, whose period
 the modulation sets (c / (8 f) for four-phase sampling: 1.87 m at 20 MHz), so the period is
 the one of the frequency given, or one the data chose; ``depth / r`` carries it into a
-z-depth. Left out of the model, each of them biases the intrinsics.
+z-depth. ``radial`` is an offset in the light's path rather than in the depth: in z-depth it
+reads less towards the image's edges, which bows every board's depth alike, and which near
+frontal views otherwise take for a wiggle (in a radial convention it is the offset, so it is
+not offered there). Left out of the model, each of them biases the intrinsics.
 """
 from __future__ import annotations
 
@@ -18,12 +21,14 @@ import numpy as np
 
 from .errors import CalibrationError
 
-NAMES = ("depth_offset", "depth_scale", "depth_tilt_x", "depth_tilt_y", "depth_wiggle_sin", "depth_wiggle_cos")
+NAMES = ("depth_offset", "depth_scale", "depth_tilt_x", "depth_tilt_y", "depth_wiggle_sin", "depth_wiggle_cos",
+         "depth_radial")
 N_BIAS = len(NAMES)
-TERMS = {"offset": [0], "scale": [1], "tilt": [2, 3], "wiggle": [4, 5]}
-TERMS_ADDED_LATER = tuple(NAMES[i] for i in TERMS["wiggle"])   # calibration files before them lack them
-# Weak priors (offset and wiggle in metres, the rest unitless) keep terms the views cannot separate finite.
-PRIOR_SIGMA = np.array([0.1, 0.05, 0.05, 0.05, 0.05, 0.05])
+TERMS = {"offset": [0], "scale": [1], "tilt": [2, 3], "wiggle": [4, 5], "radial": [6]}
+# calibration files written before these terms lack them
+TERMS_ADDED_LATER = tuple(NAMES[i] for i in TERMS["wiggle"] + TERMS["radial"])
+# Weak priors (offset, wiggle and radial in metres, the rest unitless) keep terms the views cannot separate finite.
+PRIOR_SIGMA = np.array([0.1, 0.05, 0.05, 0.05, 0.05, 0.05, 0.1])
 SPEED_OF_LIGHT = 299_792_458.0
 # Steps of the fixed-point inversion of the wiggle: each shrinks the error by the wiggle's
 # slope, 2 pi amplitude / period (0.05 for 15 mm at 1.87 m).
@@ -61,8 +66,10 @@ def wiggle_basis(period: float | None, depth: np.ndarray, radial: np.ndarray) ->
 
 def measured(bias: np.ndarray, depth: np.ndarray, points: np.ndarray, period: float | None = None) -> np.ndarray:
     """The depth the camera reports for camera-frame points whose true depth is ``depth``."""
-    offset, scale, tx, ty, ws, wc = bias
+    offset, scale, tx, ty, ws, wc, radial = bias
     linear = (1 + scale) * depth + offset + tx * points[:, 0] + ty * points[:, 1]
+    if radial:
+        linear = linear + radial * depth / np.linalg.norm(points, axis=1)
     if period is None or (ws == 0 and wc == 0):
         return linear
     return linear + wiggle_basis(period, depth, np.linalg.norm(points, axis=1)) @ np.array([ws, wc])
@@ -71,12 +78,13 @@ def measured(bias: np.ndarray, depth: np.ndarray, points: np.ndarray, period: fl
 def true_depth(bias: np.ndarray, reported: np.ndarray, directions: np.ndarray,
                period: float | None = None) -> np.ndarray:
     """Inverse of ``measured`` along rays scaled so that the point is depth x direction."""
-    offset, scale, tx, ty, ws, wc = bias
+    offset, scale, tx, ty, ws, wc, radial = bias
     gain = 1 + scale + tx * directions[:, 0] + ty * directions[:, 1]
+    ray = np.linalg.norm(directions, axis=1)
+    offset = offset + radial / ray   # depth / r is the same all along a ray
     depth = (reported - offset) / gain
     if period is None or (ws == 0 and wc == 0):
         return depth
-    ray = np.linalg.norm(directions, axis=1)
     for _ in range(INVERSE_STEPS):
         depth = (reported - offset - wiggle_basis(period, depth, depth * ray) @ np.array([ws, wc])) / gain
     return depth

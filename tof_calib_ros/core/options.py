@@ -24,15 +24,16 @@ LOSSES = (None, "huber", "cauchy")
 
 @dataclass(frozen=True)
 class CalibrationOptions:
-    """``depth_bias``: 'auto' (the offset, and scale and tilt where the data call for them),
-    'none', or terms from 'offset', 'scale', 'tilt', 'wiggle' joined by '+'. ``distortion``: 'auto' (the
-    plumb_bob terms the data call for) or a preset of ``DISTORTION_TERMS``. ``plane_squares``:
-    'auto' (the whole board unless the black squares read apart from the white), 'white' (the
-    paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'. ``modulation_hz``: the camera's
-    modulation frequency, which sets the period of its wiggling error; given, 'auto' always
-    estimates a wiggling term; not given, 'auto' looks for one over the periods ToF cameras
-    have and takes it where the data call for it (see pipeline._select_model). A depth_bias
-    naming 'wiggle' needs it."""
+    """``depth_bias``: 'auto' (the offset, and scale, tilt and a radial offset where the data call
+    for them), 'none', or terms from 'offset', 'scale', 'tilt', 'wiggle', 'radial' joined by '+'
+    ('radial', an offset in the light's path, only for z-depth: in radial depth it is the offset).
+    ``distortion``: 'auto' (the plumb_bob terms the data call for) or a preset of
+    ``DISTORTION_TERMS``. ``plane_squares``: 'auto' (the whole board unless the black squares read
+    apart from the white), 'white' (the paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'.
+    ``modulation_hz``: the camera's modulation frequency, which sets the period of its wiggling
+    error; given, 'auto' always estimates a wiggling term; not given, 'auto' looks for one over
+    the periods ToF cameras have and takes it where the data call for it (see
+    pipeline._select_model). A depth_bias naming 'wiggle' needs it."""
 
     method: str = "depth"
     depth_convention: str = "z"
@@ -57,6 +58,9 @@ class CalibrationOptions:
             if self.modulation_hz is None and set(bias_model.TERMS["wiggle"]) & set(terms):
                 raise CalibrationError("the wiggle term needs the camera's modulation frequency "
                                        "(modulation_hz), which sets the wiggle's period")
+            if self.depth_convention == "radial" and set(bias_model.TERMS["radial"]) & set(terms):
+                raise CalibrationError("the radial term is for z-depth: in radial depth an offset in the light's "
+                                       "path is the depth offset ('offset')")
         if not isinstance(self.distortion, str) or self.distortion not in ("auto", *DISTORTION_TERMS):
             raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
                                    f"got {self.distortion!r}")

@@ -257,38 +257,49 @@ class _PlaneSamples:
         return [None if s is None else next(parts) for s in self.samples]
 
 
+class _Planarized(NamedTuple):
+    """Each view's corner depths as the camera would report them, depth error floor, plane, and
+    what its depth off the plane says of a wiggle (where there is one) and of a radial offset."""
+    depths: list[np.ndarray]
+    floors: list[float]
+    planes: list[Plane | None]
+    wiggles: list[bundle.WiggleShape | None]
+    radials: list[bundle.RadialShape | None]
+
+
 def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
-                   convention: str, period: float | None = None
-                   ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[bundle.WiggleShape | None]]:
-    """Corner depths as the camera would report them (the plane is fitted to depth corrected by
-    the bias's planar terms, where the board really is flat), each view's depth error floor, the
-    planes, and where there is a wiggle (``period``) what each view's depth says of it.
+                   convention: str, period: float | None = None) -> _Planarized:
+    """The views planarized (the plane is fitted to depth corrected by the bias's planar terms and
+    its radial offset, where the board really is flat), and where there is a wiggle (``period``)
+    what each view's depth says of it.
     The wiggle is not corrected before the plane is fitted: the plane would then depend on the
     wiggle's estimate, which near frontal settles on a wrong offset and wiggle that agree with the
     planes they shaped (1.7 % in fx on noiseless views). Instead the plane keeps the wiggle's planar
     part, and the fit predicts that part, and the depth off the plane (``bundle.WiggleShape``).
     A view without usable depth gets NaN depths: it counts with its corners only."""
-    depths, floors, planes, shapes = _planarize_periods(views, samples, intr, bias, convention,
-                                                        [] if period is None else [period])
-    return depths, floors, planes, [s[0] if s else None for s in shapes]
+    depths, floors, planes, shapes, radials = _planarize_periods(views, samples, intr, bias, convention,
+                                                                 [] if period is None else [period])
+    return _Planarized(depths, floors, planes, [s[0] if s else None for s in shapes], radials)
 
 
 def _planarize_periods(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
                        convention: str, periods: Sequence[float]
-                       ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[list[bundle.WiggleShape]]]:
+                       ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[list[bundle.WiggleShape]],
+                                  list[bundle.RadialShape | None]]:
     """``_planarize_all`` with what each view's depth says of a wiggle of each of ``periods``:
     the planes once for them all."""
     corner_dirs = np.split(directions(np.concatenate([v.corners for v in views]), intr, convention),
                            np.cumsum([len(v.corners) for v in views])[:-1])
     planar = bias.copy()
     planar[bias_model.TERMS["wiggle"]] = 0.0
-    depths, floors, planes, shapes = [], [], [], []
+    depths, floors, planes, shapes, radials = [], [], [], [], []
     for v, smp, su, u in zip(views, samples.samples, samples.directions(intr, convention), corner_dirs):
         if smp is None:
             depths.append(np.full(len(v.corners), np.nan))
             floors.append(0.0)
             planes.append(None)
             shapes.append([])
+            radials.append(None)
             continue
         flat = bias_model.true_depth(planar, smp.depth, su)
         plane = fit_plane_to(su, flat, smp.pixels, smp.black)
@@ -297,7 +308,25 @@ def _planarize_periods(views: list[_Prepared], samples: _PlaneSamples, intr: np.
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
         shapes.append(_wiggle_shapes(plane, su, flat, bias, planar, smp, u, periods) if periods else [])
-    return depths, floors, planes, shapes
+        radials.append(_radial_shape(plane, su, flat, planar, smp, u, d) if convention == "z" else None)
+    return depths, floors, planes, shapes, radials
+
+
+def _radial_shape(plane: Plane, su: np.ndarray, flat: np.ndarray, planar: np.ndarray, smp: DepthSamples,
+                  u: np.ndarray, d: np.ndarray) -> bundle.RadialShape:
+    """What a view's depth says of a radial offset beyond the one taken out before its plane was
+    fitted (bundle.RadialShape; ``u`` and ``d``: the corners' directions and depths on the plane):
+    a plane takes the offset's planar part and leaves its bow, which is what tells it from the
+    depth offset."""
+    unit = np.zeros(bias_model.N_BIAS)
+    unit[bias_model.TERMS["radial"]] = 1.0
+    basis = flat - bias_model.true_depth(planar + unit, smp.depth, su)   # a unit radial offset at the samples
+    information, moment = off_plane(plane, su, flat, smp.black, basis[:, None])
+    kept = d + planar_part(plane, su, flat, smp.black, basis[:, None], u)[:, 0]
+    moved = bias_model.measured(planar, kept, u * kept[:, None]) - bias_model.measured(planar, d, u * d[:, None])
+    at = float(planar[bias_model.TERMS["radial"]][0])
+    return bundle.RadialShape(float(information[0, 0]), float(moment[0] + information[0, 0] * at),
+                              1 / np.linalg.norm(u, axis=1) - moved, at)
 
 
 def _wiggle_shapes(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndarray, planar: np.ndarray,
@@ -332,10 +361,10 @@ def _wiggle_shapes(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndar
             for k, c in enumerate(curves)]
 
 
-def _observations(obj, views: list[_Prepared], depths, floors, wiggles,
+def _observations(obj, views: list[_Prepared], depths, floors, wiggles, radials,
                   inflation: float = 1.0) -> list[bundle.Observations]:
-    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, w, inflation)
-            for o, v, d, f, w in zip(obj, views, depths, floors, wiggles)]
+    return [bundle.Observations(o, v.corners, d, f, PLANE_DOF, w, inflation, r)
+            for o, v, d, f, w, r in zip(obj, views, depths, floors, wiggles, radials)]
 
 
 def _spread_deg(normals: np.ndarray) -> float:
@@ -366,7 +395,7 @@ def _k_update(views, samples, board, intr, bias, convention, estimate_offset, ma
     """The paper's lines 4-9: update K, re-planarize, until K settles."""
     err = np.inf
     for _ in range(max_iter):
-        depths, _, _, _ = _planarize_all(views, samples, intr, bias, convention)
+        depths = _planarize_all(views, samples, intr, bias, convention).depths
         new, offset, err = update_intrinsics(intr, [v.corners for v in views], depths,
                                              [board.object_points(v.ids) for v in views], convention,
                                              estimate_offset)
@@ -530,7 +559,8 @@ def _black_offset(smp: DepthSamples, plane: Plane, intr: np.ndarray, convention:
 
 
 def _select_model(observations: list[bundle.Observations], state: bundle.State, convention: str,
-                  options: CalibrationOptions, say: Callable[[str], None]) -> tuple[bundle.State, list[int], Model]:
+                  options: CalibrationOptions, say: Callable[[str], None],
+                  radial: bool = False) -> tuple[bundle.State, list[int], Model]:
     """The terms the data call for, against the Bayesian information criterion: a term is taken
     when the likelihood-ratio statistic it brings exceeds ln(n) per parameter, n being the
     independent measurements. The statistic is the larger of the score test (the first-order drop
@@ -546,7 +576,8 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     length (its slope over their distances is a depth scale), so a test of it there would
     pass it over and trust a focal length it has bent; estimated, its uncertainty is the
     focal length's. Not given, the caller looks for one at the model chosen without it
-    (``_look_for_wiggle``) and, where it finds one, chooses again with its period as if given.
+    (``_look_for_wiggle``) and, where it finds one, chooses again with its period as if given;
+    where it finds a radial offset instead, it chooses again with that a candidate (``radial``).
     A depth scale is never chosen
     here: it would make the depth silent on the focal length (the two trade exactly), a ToF
     camera's scale is set by its modulation frequency, and a scale the data seem to call for
@@ -559,6 +590,7 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     period = options.wiggle_period
     if options.depth_bias == "auto":
         depth_terms, candidates = ["offset"] + (["wiggle"] if period is not None else []), ["tilt"]
+        candidates += ["radial"] if radial else []
     else:
         depth_terms, candidates = ([] if options.depth_bias == "none" else options.depth_bias.split("+")), []
     base += [N_INTRINSICS + k for k in bias_model.parse("+".join(depth_terms) or "none")]
@@ -617,9 +649,9 @@ def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit,
     they do not depend on it."""
     extra = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
     periods = [bias_model.wiggle_period(hz) for hz in WIGGLE_CANDIDATES_HZ]
-    depths, floors, _, shapes = _planarize_periods(prepared, plane_samples, fit.state.intrinsics, fit.state.bias,
-                                                   convention, periods)
-    at_each = [_observations(obj, prepared, depths, floors, [s[k] if s else None for s in shapes])
+    depths, floors, _, shapes, radials = _planarize_periods(prepared, plane_samples, fit.state.intrinsics,
+                                                            fit.state.bias, convention, periods)
+    at_each = [_observations(obj, prepared, depths, floors, [s[k] if s else None for s in shapes], radials)
                for k in range(len(periods))]
     gains = [bundle.score(views, replace(fit, wiggle_period=period), convention, extra)
              for views, period in zip(at_each, periods)]
@@ -631,7 +663,8 @@ class _WiggleSearch:
     """What the search for a wiggle of unknown period found: each candidate period's ``gains``
     against the wiggle's ``price``, the views as each period has them (``views_at``) and as the fit
     without a wiggle had them (``plain``), and where a wiggle was taken, the period of ``hz`` and
-    the fit with it (``refit``)."""
+    the fit with it (``refit``), which has a radial offset instead where ``radial`` (of gain
+    ``radial_gain``)."""
     evidence: dict[str, float]
     reason: str
     gains: np.ndarray
@@ -640,6 +673,8 @@ class _WiggleSearch:
     plain: list[bundle.Observations]
     hz: float
     refit: _Fitted | None = None
+    radial: bool = False
+    radial_gain: float = 0.0
 
 
 def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundle.State,
@@ -652,14 +687,35 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
     recordings and, on the real Kinect v2 views (which unwrap three frequencies: no one
     sinusoid), wiggles of 2-4 mm (chi-square 5 to 10 against their jackknife, on 2 degrees of
     freedom), one of which took 5-6 views' fx 2.6 % off. The refit chooses the model again from
-    ``start``, the state the choice without it started from."""
+    ``start``, the state the choice without it started from.
+    In z-depth a radial offset (an offset in the light's path) is the wiggle's limit at long
+    periods: it bows every view alike, where a wiggle's bow changes with the distance. Where it
+    pays its price (one term) and gains no less than a wiggle at any period, the model is chosen
+    again with it a candidate instead: near frontal, a 50 mm radial offset was taken for a wiggle
+    and fx trusted 4.4 % off at 18 sigmas. Not where a wiggle gains more, even by less than its
+    two further terms' price: near frontal, few views of a 15 mm wiggle gained 2-6 more than a
+    radial offset would, which taken put fx 2-8 % off."""
     convention = options.depth_convention
     gains, views_at = _wiggle_gains(prepared, plane_samples, obj, fitted.fit, convention)
-    price = WIGGLE_PRICE_TERMS * np.log(bundle.n_observations(fitted.observations))
+    n = bundle.n_observations(fitted.observations)
+    price = WIGGLE_PRICE_TERMS * np.log(n)
     k = int(np.argmax(gains))
     hz = float(WIGGLE_CANDIDATES_HZ[k])
     evidence = {"gain": round(float(gains[k]), 3), "price": round(float(price), 3)}
     found = _WiggleSearch(evidence, "", gains, float(price), views_at, fitted.observations, hz)
+    if convention == "z":
+        # the score test, as the wiggle's: the two compare at the same fit
+        radial_gain = bundle.score(fitted.observations, fitted.fit, convention, [bundle.RADIAL])
+        evidence["radial_gain"] = round(radial_gain, 3)
+        if radial_gain > np.log(n) and radial_gain >= gains[k]:
+            refit = _fit(prepared, plane_samples, obj, fitted.observations, start, False, options, say, radial=True)
+            if "radial" in refit.model.depth_bias.split("+"):
+                found.refit, found.radial, found.radial_gain = refit, True, radial_gain
+                found.reason = (f"a radial offset in the depth (an offset in the light's path, which bows every view "
+                                f"alike), not a wiggle: its gain {radial_gain:.1f} against its price {np.log(n):.1f}, "
+                                f"a wiggle's at most {gains[k]:.1f} against {price:.1f}")
+                say(found.reason)
+                return found
     if gains[k] <= price or k in (0, len(gains) - 1):
         found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
                         + (f"below its price, {price:.1f}" if gains[k] <= price else
@@ -710,10 +766,12 @@ def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free
     their fits a few standard deviations apart. A wiggle no ToF camera has (beyond MAX_WIGGLE_M)
     is no candidate. Each is one solve from this fit, on the views as the search planarized them."""
     wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
-    log_weight = 0.5 * np.r_[0.0, search.gains - search.price]   # no wiggle, then each period
+    # no wiggle (or the radial offset taken instead, at its price), then each period
+    plain = search.radial_gain - search.price / WIGGLE_PRICE_TERMS if search.radial else 0.0
+    log_weight = 0.5 * np.r_[plain, search.gains - search.price]
     weights = np.exp(log_weight - log_weight.max())
     weights /= weights.sum()
-    chosen = 0 if search.refit is None else 1 + int(np.argmax(search.gains))
+    chosen = 0 if search.refit is None or search.radial else 1 + int(np.argmax(search.gains))
     here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
     state = fit.state.copy()
     state.bias[bias_model.TERMS["wiggle"]] = 0.0
@@ -772,9 +830,9 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
         state = fit.state
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes, wiggles = _planarize_all(prepared, plane_samples, state.intrinsics, state.bias,
-                                                        convention, options.wiggle_period)
-        observations = _observations(obj, prepared, depths, floors, wiggles, inflation)
+        depths, floors, planes, wiggles, radials = _planarize_all(prepared, plane_samples, state.intrinsics,
+                                                                  state.bias, convention, options.wiggle_period)
+        observations = _observations(obj, prepared, depths, floors, wiggles, radials, inflation)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         # the first round starts where the model's choice left it, on the same observations: only
@@ -795,12 +853,13 @@ class _Fitted(NamedTuple):
 
 
 def _fit(prepared, plane_samples, obj, observations, state, scale: bool, options: CalibrationOptions, say,
-         model: Model | None = None, free: list[int] | None = None) -> _Fitted:
-    """The model the data call for (unless ``model`` and its ``free`` parameters are given) and the
-    joint fit with it, with a depth scale term where ``scale``. Returns the fit, its free
-    parameters, the model, and what ``_joint`` returns beside the fit."""
+         model: Model | None = None, free: list[int] | None = None, radial: bool = False) -> _Fitted:
+    """The model the data call for (unless ``model`` and its ``free`` parameters are given; a radial
+    offset among the candidates where ``radial``) and the joint fit with it, with a depth scale
+    term where ``scale``. Returns the fit, its free parameters, the model, and what ``_joint``
+    returns beside the fit."""
     if model is None or free is None:
-        state, free, model = _select_model(observations, state, options.depth_convention, options, say)
+        state, free, model = _select_model(observations, state, options.depth_convention, options, say, radial)
     if scale:
         free = sorted({*free, N_INTRINSICS + 1})
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
@@ -1158,8 +1217,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
                                "disagree (corners out of order or of other frames, or another board?)") from exc
     say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
 
-    depths, floors, planes, wiggles = _planarize_all(prepared, plane_samples, intr, bias, convention,
-                                                    options.wiggle_period)
+    depths, floors, planes, wiggles, radials = _planarize_all(prepared, plane_samples, intr, bias, convention,
+                                                              options.wiggle_period)
     poses = []
     for o, v, d in zip(obj, prepared, depths):
         if np.isfinite(d).all():
@@ -1170,15 +1229,16 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     state = bundle.State(intr, bias, np.array(poses))
     # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
     # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
-    observations = _observations(obj, prepared, depths, floors, wiggles)
+    observations = _observations(obj, prepared, depths, floors, wiggles, radials)
     start = bundle.solve(observations, state, convention, [], rounds=1).state
     fitted = _fit(prepared, plane_samples, obj, observations, start, False, options, say)
     asked, found_wiggle = options, None
     if options.depth_bias == "auto" and options.modulation_hz is None:
         found_wiggle = _look_for_wiggle(prepared, plane_samples, obj, fitted, start, options, say)
         if found_wiggle.refit is not None:
-            options = replace(options, modulation_hz=found_wiggle.hz)
+            options = options if found_wiggle.radial else replace(options, modulation_hz=found_wiggle.hz)
             fitted = found_wiggle.refit
+    radial = found_wiggle is not None and found_wiggle.radial
     fit, free, model, depths, planes, observations = fitted
     corners = None if corner_fit is None else _CornersAlone(corner_fit, obj, prepared, image_size)
     check = _depth_check(fit, depths, planes, corners, convention) \
@@ -1216,7 +1276,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         inflation *= DEPTH_INFLATION_STEP
         lighter = [replace(o, depth_inflation=inflation) for o in observations]
         fit, free, chosen, depths, planes, observations = _fit(prepared, plane_samples, obj, lighter, start,
-                                                               check.scale, options, say)
+                                                               check.scale, options, say, radial=radial)
         model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
         reason, estimates = _why_yield(observations, fit, free, model, options, corners)
     if inflation > 1:
@@ -1227,8 +1287,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             f"certain (at most {MAX_DEPTH_INFLATION:g})")
         say(model.reasons[-1])
     noise_fit = fit
-    if bowl is not None and N_INTRINSICS + 1 not in free:
-        # a bow common to the views: the data may fix the scale about the truth, not about this fit's
+    if (bowl is not None or radial) and N_INTRINSICS + 1 not in free:
+        # a bow common to the views, or the radial offset taken for it: a wiggle's bows alike too
+        # near frontal, and its slope is a scale; the data may fix the scale about the truth, not
+        # about this fit's (a 15 mm wiggle taken for a radial offset put fx 2.4 % off)
         fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1)
     if found_wiggle is not None:
         alone = fit
