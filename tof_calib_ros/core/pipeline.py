@@ -268,22 +268,23 @@ class _Planarized(NamedTuple):
 
 
 def _planarize_all(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
-                   convention: str, period: float | None = None) -> _Planarized:
+                   convention: str, period: float | None = None, radial: bool = False) -> _Planarized:
     """The views planarized (the plane is fitted to depth corrected by the bias's planar terms and
     its radial offset, where the board really is flat), and where there is a wiggle (``period``)
-    what each view's depth says of it.
+    what each view's depth says of it, and of a radial offset where one may be in the model
+    (``radial``, ``_radial_may_enter``).
     The wiggle is not corrected before the plane is fitted: the plane would then depend on the
     wiggle's estimate, which near frontal settles on a wrong offset and wiggle that agree with the
     planes they shaped (1.7 % in fx on noiseless views). Instead the plane keeps the wiggle's planar
     part, and the fit predicts that part, and the depth off the plane (``bundle.WiggleShape``).
     A view without usable depth gets NaN depths: it counts with its corners only."""
     depths, floors, planes, shapes, radials = _planarize_periods(views, samples, intr, bias, convention,
-                                                                 [] if period is None else [period])
+                                                                 [] if period is None else [period], radial)
     return _Planarized(depths, floors, planes, [s[0] if s else None for s in shapes], radials)
 
 
 def _planarize_periods(views: list[_Prepared], samples: _PlaneSamples, intr: np.ndarray, bias: np.ndarray,
-                       convention: str, periods: Sequence[float]
+                       convention: str, periods: Sequence[float], radial: bool
                        ) -> tuple[list[np.ndarray], list[float], list[Plane | None], list[list[bundle.WiggleShape]],
                                   list[bundle.RadialShape | None]]:
     """``_planarize_all`` with what each view's depth says of a wiggle of each of ``periods``:
@@ -308,8 +309,17 @@ def _planarize_periods(views: list[_Prepared], samples: _PlaneSamples, intr: np.
         floors.append(float(np.median(se) * (1 + bias[1])))
         planes.append(plane)
         shapes.append(_wiggle_shapes(plane, su, flat, bias, planar, smp, u, periods) if periods else [])
-        radials.append(_radial_shape(plane, su, flat, planar, smp, u, d) if convention == "z" else None)
+        radials.append(_radial_shape(plane, su, flat, planar, smp, u, d) if radial else None)
     return depths, floors, planes, shapes, radials
+
+
+def _radial_may_enter(options: CalibrationOptions) -> bool:
+    """Whether a radial offset may be in the depth model: asked for, or one the data may choose
+    (z-depth, without the modulation frequency, where the search for a wiggle weighs it). Its
+    shapes cost a quarter of the planarization, for nothing elsewhere."""
+    if options.depth_bias == "auto":
+        return options.depth_convention == "z" and options.modulation_hz is None
+    return bias_model.TERMS["radial"][0] in bias_model.parse(options.depth_bias)
 
 
 def _radial_shape(plane: Plane, su: np.ndarray, flat: np.ndarray, planar: np.ndarray, smp: DepthSamples,
@@ -641,16 +651,16 @@ def _select_model(observations: list[bundle.Observations], state: bundle.State, 
     return fit.state, sorted(free), model
 
 
-def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit,
-                  convention: str) -> tuple[np.ndarray, list[list[bundle.Observations]]]:
+def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit, convention: str,
+                  radial: bool) -> tuple[np.ndarray, list[list[bundle.Observations]]]:
     """The score test's gain for a wiggle of each candidate period, at ``fit`` (which has none),
     and the views as each period has them: what their distances and their depth off their
-    planes say of it. The planes, and so the test, need no refit per period: without a wiggle
-    they do not depend on it."""
+    planes say of it (and of a radial offset, where ``radial``). The planes, and so the test,
+    need no refit per period: without a wiggle they do not depend on it."""
     extra = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
     periods = [bias_model.wiggle_period(hz) for hz in WIGGLE_CANDIDATES_HZ]
     depths, floors, _, shapes, radials = _planarize_periods(prepared, plane_samples, fit.state.intrinsics,
-                                                            fit.state.bias, convention, periods)
+                                                            fit.state.bias, convention, periods, radial)
     at_each = [_observations(obj, prepared, depths, floors, [s[k] if s else None for s in shapes], radials)
                for k in range(len(periods))]
     gains = [bundle.score(views, replace(fit, wiggle_period=period), convention, extra)
@@ -663,8 +673,8 @@ class _WiggleSearch:
     """What the search for a wiggle of unknown period found: each candidate period's ``gains``
     against the wiggle's ``price``, the views as each period has them (``views_at``) and as the fit
     without a wiggle had them (``plain``), and where a wiggle was taken, the period of ``hz`` and
-    the fit with it (``refit``), which has a radial offset instead where ``radial`` (of gain
-    ``radial_gain``)."""
+    the fit with it (``refit``), which has a radial offset instead where ``radial``. In z-depth,
+    ``radial_gain`` is the radial offset's gain, taken or not."""
     evidence: dict[str, float]
     reason: str
     gains: np.ndarray
@@ -674,7 +684,7 @@ class _WiggleSearch:
     hz: float
     refit: _Fitted | None = None
     radial: bool = False
-    radial_gain: float = 0.0
+    radial_gain: float | None = None
 
 
 def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundle.State,
@@ -694,23 +704,28 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
     again with it a candidate instead: near frontal, a 50 mm radial offset was taken for a wiggle
     and fx trusted 4.4 % off at 18 sigmas. Not where a wiggle gains more, even by less than its
     two further terms' price: near frontal, few views of a 15 mm wiggle gained 2-6 more than a
-    radial offset would, which taken put fx 2-8 % off."""
+    radial offset would, which taken put fx 2-8 % off. Nor is a wiggle refitted with the radial
+    offset a candidate beside it: near frontal the offset then took the bow the views share, and
+    left wiggles that alone stood at chi-square 83-150 against their jackknife within it (0.003
+    to 3.1). Where the two gain alike the data cannot tell them apart, and fx's uncertainty
+    weighs both (``_over_wiggles``)."""
     convention = options.depth_convention
-    gains, views_at = _wiggle_gains(prepared, plane_samples, obj, fitted.fit, convention)
+    radial = _radial_may_enter(options)
+    gains, views_at = _wiggle_gains(prepared, plane_samples, obj, fitted.fit, convention, radial)
     n = bundle.n_observations(fitted.observations)
     price = WIGGLE_PRICE_TERMS * np.log(n)
     k = int(np.argmax(gains))
     hz = float(WIGGLE_CANDIDATES_HZ[k])
     evidence = {"gain": round(float(gains[k]), 3), "price": round(float(price), 3)}
     found = _WiggleSearch(evidence, "", gains, float(price), views_at, fitted.observations, hz)
-    if convention == "z":
+    if radial:
         # the score test, as the wiggle's: the two compare at the same fit
-        radial_gain = bundle.score(fitted.observations, fitted.fit, convention, [bundle.RADIAL])
+        radial_gain = found.radial_gain = bundle.score(fitted.observations, fitted.fit, convention, [bundle.RADIAL])
         evidence["radial_gain"] = round(radial_gain, 3)
         if radial_gain > np.log(n) and radial_gain >= gains[k]:
             refit = _fit(prepared, plane_samples, obj, fitted.observations, start, False, options, say, radial=True)
             if "radial" in refit.model.depth_bias.split("+"):
-                found.refit, found.radial, found.radial_gain = refit, True, radial_gain
+                found.refit, found.radial = refit, True
                 found.reason = (f"a radial offset in the depth (an offset in the light's path, which bows every view "
                                 f"alike), not a wiggle: its gain {radial_gain:.1f} against its price {np.log(n):.1f}, "
                                 f"a wiggle's at most {gains[k]:.1f} against {price:.1f}")
@@ -756,35 +771,41 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
 def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
                   options: CalibrationOptions, search: _WiggleSearch) -> bundle.Fit:
     """The fit of the depth model chosen, its covariance widened by how far the fits of the others
-    lie: no wiggle, and a wiggle at each candidate period, each weighted by its likelihood (the
-    score test's gain less the wiggle's price, as the information criterion weighs them: a model
-    average over whether the depth wiggles and at what period). Near frontal, views cannot tell a
-    wiggle's slope over their distances from the focal length: with the wiggle not taken because
-    its gain fell just short of its price, or at the end of the periods looked for, or within its
-    views' jackknife, 6 % of such results were trusted with the truth 2 to 10 stated sigmas away;
-    with it taken, views that cannot tell the period leave the periods near-equally likely and
-    their fits a few standard deviations apart. A wiggle no ToF camera has (beyond MAX_WIGGLE_M)
-    is no candidate. Each is one solve from this fit, on the views as the search planarized them."""
+    lie: no wiggle, a wiggle at each candidate period and, in z-depth, a radial offset, each
+    weighted by its likelihood (the score test's gain less the wiggle's price, as the information
+    criterion weighs them: a model average over whether the depth wiggles and at what period).
+    Near frontal, views cannot tell a wiggle's slope over their distances from the focal length:
+    with the wiggle not taken because its gain fell just short of its price, or at the end of the
+    periods looked for, or within its views' jackknife, 6 % of such results were trusted with the
+    truth 2 to 10 stated sigmas away; with it taken, views that cannot tell the period leave the
+    periods near-equally likely and their fits a few standard deviations apart. The radial offset
+    is the wiggle's limit at long periods and is chosen over one by its gain alone, so it is
+    weighed at the wiggle's price: at its own, the wiggles it narrowly beat weighed 1/n of it, and
+    near frontal the 15 mm wiggles it was taken for left fx 4.6 % off at 2-3 stated sigmas (the
+    radial offset's fx is the plain model's, with the wiggle's slope in it). A wiggle no ToF
+    camera has (beyond MAX_WIGGLE_M) is no candidate. Each is one solve from this fit, on the
+    views as the search planarized them."""
     wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
-    # no wiggle (or the radial offset taken instead, at its price), then each period
-    plain = search.radial_gain - search.price / WIGGLE_PRICE_TERMS if search.radial else 0.0
-    log_weight = 0.5 * np.r_[plain, search.gains - search.price]
+    base = [t for t in free if t not in (*wiggle, bundle.RADIAL)]
+    # (log weight, views, terms, period): no wiggle, the radial offset, then each period
+    models = [(0.0, search.plain, base, None)]
+    if search.radial_gain is not None:
+        models.append((search.radial_gain - search.price, search.plain, sorted({*base, bundle.RADIAL}), None))
+    models += [(gain - search.price, views, sorted({*base, *wiggle}), bias_model.wiggle_period(hz))
+               for gain, views, hz in zip(search.gains, search.views_at, WIGGLE_CANDIDATES_HZ)]
+    log_weight = 0.5 * np.array([m[0] for m in models])
     weights = np.exp(log_weight - log_weight.max())
     weights /= weights.sum()
-    chosen = 0 if search.refit is None or search.radial else 1 + int(np.argmax(search.gains))
+    chosen = 0 if search.refit is None else 1 if search.radial else \
+        len(models) - len(search.gains) + int(np.argmax(search.gains))
     here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
     state = fit.state.copy()
-    state.bias[bias_model.TERMS["wiggle"]] = 0.0
+    state.bias[bias_model.TERMS["wiggle"] + bias_model.TERMS["radial"]] = 0.0
     inflation = observations[0].depth_inflation
     total, spread = weights[chosen], np.zeros_like(fit.covariance)
-    for m, weight in enumerate(weights):
+    for m, ((_, views, terms, period), weight) in enumerate(zip(models, weights)):
         if m == chosen or weight < MIN_MODEL_WEIGHT:
             continue
-        if m == 0:
-            views, period, terms = search.plain, None, [t for t in free if t not in wiggle]
-        else:
-            views, terms = search.views_at[m - 1], sorted({*free, *wiggle})
-            period = bias_model.wiggle_period(WIGGLE_CANDIDATES_HZ[m - 1])
         views = [replace(o, depth_inflation=inflation) for o in views]
         there = bundle.solve(views, state, options.depth_convention, terms, loss=options.loss, wiggle_period=period)
         if np.hypot(*there.state.bias[bias_model.TERMS["wiggle"]]) > MAX_WIGGLE_M:
@@ -831,7 +852,8 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
         say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
             f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
         depths, floors, planes, wiggles, radials = _planarize_all(prepared, plane_samples, state.intrinsics,
-                                                                  state.bias, convention, options.wiggle_period)
+                                                                  state.bias, convention, options.wiggle_period,
+                                                                  _radial_may_enter(options))
         observations = _observations(obj, prepared, depths, floors, wiggles, radials, inflation)
         change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
@@ -1218,7 +1240,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
 
     depths, floors, planes, wiggles, radials = _planarize_all(prepared, plane_samples, intr, bias, convention,
-                                                              options.wiggle_period)
+                                                              options.wiggle_period, _radial_may_enter(options))
     poses = []
     for o, v, d in zip(obj, prepared, depths):
         if np.isfinite(d).all():
