@@ -312,6 +312,7 @@ _WRITE = """
 import os, signal, sys
 import numpy as np
 from tof_calib_ros import View
+from tof_calib_ros.core.depth_bias import N_BIAS
 from tof_calib_ros.core.result import CalibrationResult, ViewReport
 from tof_calib_ros.files.output_folder import write_calibration
 out, scale, n, kill_at, repeat = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
@@ -328,7 +329,7 @@ K = np.array([[500.0 * scale, 0, 320], [0, 500.0 * scale, 240], [0, 0, 1]])
 view = ViewReport(index=0, rvec=np.zeros(3), tvec=np.array([0, 0, 1.0]), pixel_rms=0.2, depth_rms=0.001,
                   pixel_residuals=np.zeros((4, 2)), depth_residuals=np.zeros(4))
 result = CalibrationResult(method="depth", image_size=(640, 480), depth_convention="z", K=K, D=np.zeros(5),
-                           depth_bias=np.zeros(4), std={"fx": 0.5, "fy": 0.5, "cx": 1.0, "cy": 1.0}, views=[view])
+                           depth_bias=np.zeros(N_BIAS), std={"fx": 0.5, "fy": 0.5, "cx": 1.0, "cy": 1.0}, views=[view])
 views = [View(depth=np.full((48, 64), 1000 + i, np.uint16), amplitude=np.full((48, 64), 7, np.uint16))
          for i in range(n)]
 for _ in range(repeat):

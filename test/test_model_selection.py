@@ -114,6 +114,29 @@ def test_a_wiggle_taken_for_a_radial_offset_leaves_fx_within_its_sigmas(seed, n_
     assert not res.ok or abs(res.K[0, 0] / F - 1) < 0.01, (res.K[0, 0], res.verdict)
 
 
+def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
+    """The yield loop chooses the depth model again at a lighter depth weight, and may drop a
+    radial offset the search took: fx's uncertainty is then the average about the model actually
+    fitted (its free terms say which), not about the one the search took. Here nothing is taken;
+    told that the search took the radial offset, the average must come out the same."""
+    from dataclasses import replace
+
+    from tof_calib_ros.core import bundle, pipeline
+    seen = []
+    original = pipeline._over_wiggles
+    monkeypatch.setattr(pipeline, "_over_wiggles", lambda *a: seen.append(a) or original(*a))
+    lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
+    noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=1.0)
+    calibrate(_views(lens, 3, 9, seed=1, tilt=5.0, noise=noise), BOARD)
+    observations, fit, free, options, search = seen[0]
+    assert search.radial_gain is not None and search.refit is None, search.evidence
+    assert bundle.RADIAL not in free and bundle.WIGGLE[0] not in free, free
+    told = replace(search, radial=True, refit=object())
+    fitted = original(observations, fit, free, options, search).covariance
+    assert not np.allclose(fitted, fit.covariance)   # the other models do widen it
+    np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
+
+
 def test_a_wiggling_depth_yields_to_the_corners():
     """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):
     over the distances seen its slope reads as a depth scale of a few percent, which the depth

@@ -796,8 +796,10 @@ def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free
     log_weight = 0.5 * np.array([m[0] for m in models])
     weights = np.exp(log_weight - log_weight.max())
     weights /= weights.sum()
-    chosen = 0 if search.refit is None else 1 if search.radial else \
-        len(models) - len(search.gains) + int(np.argmax(search.gains))
+    # the model fitted, as its free terms say: the yield loop chooses it again and may drop the
+    # radial offset the search took
+    chosen = len(models) - len(search.gains) + int(np.argmax(search.gains)) if wiggle[0] in free \
+        else 1 if bundle.RADIAL in free else 0
     here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
     state = fit.state.copy()
     state.bias[bias_model.TERMS["wiggle"] + bias_model.TERMS["radial"]] = 0.0
