@@ -70,6 +70,7 @@ def test_a_huge_image_message_is_refused_before_it_is_copied() -> None:
     assert MAX_PIXELS >= 1024 * 1024   # the largest ToF sensors (Azure Kinect WFOV) fit
 
 
+@pytest.mark.slow
 def test_one_bad_pair_among_good_ones_is_skipped_and_the_run_goes_on(tmp_path: Path, kinect_dir: Path, capsys) -> None:
     # 15 good views: the first 11 leave fx 1.5 % uncertain once the depth models' disagreement
     # counts (fx 369.3 +- 5.6 px, not trusted), and the run would end untrusted for that alone

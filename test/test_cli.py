@@ -74,6 +74,7 @@ def _truth(bag: Path) -> dict:
 
 
 # -- the round trip -----------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
 def test_a_simulated_recording_calibrates_to_its_ground_truth(bags, tmp_path, capsys, storage):
     code, out, err = run(capsys, "bag", bags[storage], *BOARD, "--output", tmp_path)
@@ -116,6 +117,7 @@ def test_one_worker_and_two_keep_the_same_views(bags, calibrated, tmp_path, caps
     np.testing.assert_allclose(one["camera_matrix"], two["camera_matrix"], rtol=1e-7)
 
 
+@pytest.mark.slow
 def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
     code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path)
     assert code == EXIT_OK, err
@@ -229,6 +231,7 @@ def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path
                                doc["camera_matrix"], rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):
     """Our own save_views layout, and the other formats a folder may hold, to the ground truth."""
     camera, board = sim.pmd_camera(), Board(5, 7, 0.03)
@@ -254,6 +257,7 @@ def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):
 
 
 # -- broken messages ----------------------------------------------------------------------------
+@pytest.mark.slow
 def test_broken_messages_are_skipped_counted_and_named(tmp_path, capsys):
     scene = Scene(frames=200, hold=5, transit=5, seed=2)
     camera = scene.sim_camera
@@ -416,6 +420,7 @@ def test_other_errors_exit_1(bags, capsys, tmp_path):
 
 
 # -- check ----------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_check_passes_the_calibration_and_fails_the_factory_one(bags, calibrated, capsys, tmp_path):
     code, out, err = run(capsys, "check", calibrated / "calibration.yaml", bags["mcap"], *BOARD,
                          "--output", tmp_path)

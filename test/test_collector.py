@@ -230,6 +230,7 @@ def test_memory_is_bounded_and_views_are_copies(sweep_frames, monkeypatch):
         assert v.corners.min() > 0 and v.depth.dtype == np.float32 and v.amplitude.dtype == np.uint16
 
 
+@pytest.mark.slow
 def test_collected_views_calibrate_the_camera():
     rng = np.random.default_rng(7)
     poses = sim.random_poses(CAM, BOARD, 30, rng, distance=(0.5, 1.0), max_tilt_deg=40)

@@ -204,6 +204,7 @@ def test_constant_depth_contradicts_the_corners(value, tilted):
     _good(_calibrate(views, "traditional"))   # which never reads the depth
 
 
+@pytest.mark.slow
 def test_constant_radial_depth_is_flagged(tilted):
     views = [View(np.full_like(f.depth, 0.7), f.corners) for f in tilted]
     _refused_or_flagged(_calibrate(views, "depth", depth_convention="radial"),
@@ -237,6 +238,7 @@ def _noisy(frames):
     return [View(f.depth, np.clip(f.corners + rng.normal(0, 20, f.corners.shape), 0, 199)) for f in frames]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("corrupt", [_shuffled, _swapped, _noisy], ids=["shuffled", "swapped", "noise-20px"])
 def test_corrupt_corners_fail_or_are_flagged(corrupt, tilted):
     outcome = _calibrate(corrupt(tilted), "depth")

@@ -19,6 +19,7 @@ from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.detection import detect_corners
 
 BOARD = Board(5, 7, 0.03)
+pytestmark = pytest.mark.slow   # real-data calibrations over all 51 views and their halves
 
 
 @pytest.fixture(scope="module")

@@ -45,6 +45,7 @@ def test_the_distortion_terms_the_lens_has(lens, expected):
     assert res.K[0, 0] == pytest.approx(F, abs=3 * res.std["fx"] + 0.05)
 
 
+@pytest.mark.slow
 def test_four_corners_three_images_with_a_real_lens():
     """Where OpenCV refuses (4 corners x 3 images) and a strong lens: the depth fixes the poses,
     so distortion is observable. Over twelve seeds a trusted focal length is within 2 % and
@@ -73,6 +74,7 @@ def test_the_depth_tilt_is_taken_when_the_sensor_has_it(depth_tilt, chosen):
     assert res.K[0, 2] == pytest.approx(99.5, abs=1.0) and res.K[1, 2] == pytest.approx(99.5, abs=1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("offset", [0.05, 0.0])
 def test_a_radial_offset_is_told_from_a_wiggle_near_frontal(offset):
     """A 50 mm offset in the light's path bows every near-frontal board's z-depth alike, deeper
@@ -137,6 +139,7 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_a_wiggling_depth_yields_to_the_corners():
     """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):
     over the distances seen its slope reads as a depth scale of a few percent, which the depth
@@ -158,6 +161,7 @@ def test_a_wiggling_depth_yields_to_the_corners():
     assert np.median(ours) < 0.003 and np.median(ours) < 0.5 * np.median(offset_only), (ours, offset_only)
 
 
+@pytest.mark.slow
 def test_a_wiggling_depth_leaves_the_focal_length_within_its_sigmas():
     """General poses, 15 mm of wiggling, no modulation frequency: where the depth's level departs
     from the corners' by 2 standard errors, the scale term takes it. Over ten seeds the true fx
@@ -175,6 +179,7 @@ def test_a_wiggling_depth_leaves_the_focal_length_within_its_sigmas():
     assert len(beyond) <= 2, beyond
 
 
+@pytest.mark.slow
 def test_a_depth_that_pulls_the_corners_off_their_fit_gives_way_to_them():
     """General poses, 4 corners a view, 15 mm of wiggling, and a depth model without the wiggle:
     what the model cannot take of it pulls the camera off what the corners say (they fit 10-70
@@ -195,6 +200,7 @@ def test_a_depth_that_pulls_the_corners_off_their_fit_gives_way_to_them():
     assert np.median(full) > 0.01, full   # the depth alone was off: the corners made the difference
 
 
+@pytest.mark.slow
 def test_a_depth_error_of_each_views_own_yields_to_the_corners():
     """Each view's depth off by its own offset (20 mm, 10 mm apart from view to view; 8 views in
     general poses): no model term takes it. Before the depth yielded to it, its fx moved by
@@ -223,6 +229,7 @@ def test_a_depth_error_of_each_views_own_yields_to_the_corners():
                 assert res.std["fx"] < 0.5 * alone, (seed, res.std["fx"], alone)
 
 
+@pytest.mark.slow
 def test_a_near_frontal_wiggle_of_unknown_period_is_found_and_fx_is_within_its_sigmas():
     """Near frontal without the modulation frequency, a wiggle's slope is a depth scale the views
     cannot tell from the focal length. The search finds the wiggle by its curvature across the
@@ -249,6 +256,7 @@ def test_a_near_frontal_wiggle_of_unknown_period_is_found_and_fx_is_within_its_s
     assert len(beyond) <= 1, beyond
 
 
+@pytest.mark.slow
 def test_a_near_frontal_wiggle_the_search_leaves_out_still_counts_in_fx_sigma():
     """Three near-frontal views of 9 corners often cannot show a 15 mm wiggle: its gain falls
     short of its price, or peaks at the end of the periods looked for, and the model is chosen
@@ -271,6 +279,7 @@ def test_a_near_frontal_wiggle_the_search_leaves_out_still_counts_in_fx_sigma():
     assert left_out >= 3, left_out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amplitude", [0.015, 0.0])
 def test_the_wiggle_is_estimated_where_the_modulation_frequency_is_given(amplitude):
     """The modulation frequency gives the wiggle's period (1.87 m at 20 MHz); its amplitude and
@@ -290,6 +299,7 @@ def test_the_wiggle_is_estimated_where_the_modulation_frequency_is_given(amplitu
         assert abs(res.K[0, 0] / F - 1) < 0.003 and abs(res.K[0, 0] - F) < 3 * res.std["fx"] + 0.05, res.K[0, 0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amplitude, n_img, n_corn", [(0.015, 6, 16), (0.0, 6, 16), (0.015, 5, 4)])
 def test_the_wiggle_and_its_period_are_chosen_by_the_data(amplitude, n_img, n_corn):
     """Without the modulation frequency the default looks for a wiggle over the periods of 8 to
@@ -338,6 +348,7 @@ def test_a_near_frontal_wiggle_is_exact_on_noiseless_views():
         assert np.hypot(*(res.depth_bias[4:6] - truth)) < 0.002 and abs(res.depth_bias[0]) < 0.003, res.depth_bias
 
 
+@pytest.mark.slow
 def test_a_near_frontal_wiggle_of_given_period_is_near_the_cramer_rao_bound():
     """Near frontal, a view's distance barely changes across the board, and its plane keeps only
     the wiggle's planar part, which trades with the focal length. The wiggle's curvature across
@@ -367,6 +378,7 @@ def test_a_near_frontal_wiggle_of_given_period_is_near_the_cramer_rao_bound():
     assert np.sqrt(np.mean(np.square(errors))) < 1.5, errors
 
 
+@pytest.mark.slow
 def test_a_near_frontal_wiggle_of_given_period_on_a_quiet_sensor_is_within_its_sigmas():
     """With 2 mm of depth noise the stated fx uncertainty is a fifth of the benchmark's. A plane
     cut that kept one side of a bowed board's rim noise (planarize.on_surface), and each corner's

@@ -94,6 +94,7 @@ _KILLER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_killed_at_every_rename_a_reader_sees_the_old_set_or_the_new(tmp_path: Path) -> None:
     seen = []
     for n in range(1, 60):

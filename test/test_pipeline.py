@@ -149,6 +149,7 @@ def test_a_view_with_unusable_depth_counts_with_its_corners_only():
     assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
 
 
+@pytest.mark.slow
 def test_robust_losses_resist_a_misdetected_corner():
     views, _ = _scene(5, 8, noise=sim.Noise(depth=0.003))
     rng = np.random.default_rng(8)
@@ -178,6 +179,7 @@ def test_verdict_names_what_is_poorly_constrained():
     assert res.to_dict()["verdict"]["ok"] is False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("square, depth_factor", [
     (0.08, 1.0),   # the square given twice its size
     (0.04, 2.0),   # depth read in units twice too large
@@ -202,6 +204,7 @@ def test_a_wrong_square_size_or_depth_unit_is_not_trusted(square, depth_factor):
     assert res.to_dict()["corner_only_focal"]["fx"] == pytest.approx(CAM.params[0], rel=0.01)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("factor", [1.1, 1 / 1.2, 0.9])
 def test_a_square_a_tenth_off_is_refused_saying_which_way(factor):
     """Not a fixed 25 %: the depth-aided and corner-only focal lengths are compared with the

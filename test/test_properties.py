@@ -394,6 +394,7 @@ options = st.fixed_dictionaries({}, optional={
 })
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(options)
 def test_calibrate_options_work_or_raise_calibration_error(views, kwargs):
@@ -410,6 +411,7 @@ def test_calibrate_options_work_or_raise_calibration_error(views, kwargs):
         assert result.K[0, 0] == pytest.approx(CAM.params[0], rel=0.01)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("wrong", [
     # z-depth calibrated as radial: trusted 3 % off before the corners-fit check (full distortion and a 4 degree
     # depth tilt absorbed most of it); distortion 'none' on a lens with k1 = -0.1: trusted 1.9 % off, its pixel

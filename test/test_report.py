@@ -253,6 +253,7 @@ def test_views_that_are_not_the_result_s_are_refused(report, tmp_path):
     assert not (tmp_path / "r.html").exists()
 
 
+@pytest.mark.slow
 def test_a_report_on_real_kinect_views(kinect_dir, tmp_path):
     board = Board(5, 7, 0.03)
     paths = sorted(kinect_dir.glob("*_ir.png"))[::6][:8]

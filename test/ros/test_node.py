@@ -35,6 +35,7 @@ from tof_calib_ros.files.calibration_file import read_camera_yaml  # noqa: E402
 CALIBRATE_TIMEOUT_S = 90.0
 
 
+@pytest.mark.slow
 def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     out, driver_file = tmp_path / "out", tmp_path / "driver.yaml"
     topics = ["-r", "amplitude:=/tof/amplitude", "-r", "depth:=/tof/depth", "-r", "camera_info:=/tof/camera_info"]
@@ -130,6 +131,7 @@ def _image(encoding: str, width: int, height: int, bytes_per_pixel: int, stamp: 
     return msg
 
 
+@pytest.mark.slow
 def test_bad_messages_are_reported_not_fatal(launch, spinner):
     node = launch("calibration_node", "-r", "__ns:=/t2")
     resp = spinner.call(Trigger, "/t2/calibration_node/reset", timeout=START_TIMEOUT_S,
@@ -236,6 +238,7 @@ def test_parameters_are_checked(launch, spinner):
     assert bad.proc.returncode == 1 and "must be one of 'z', 'radial'" in bad.output(), logs(bad)
 
 
+@pytest.mark.slow
 def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
     """README command 1, as a user runs it."""
     import subprocess
@@ -256,6 +259,7 @@ def test_demo_calibrates_the_simulated_camera_and_commits(ros, tmp_path):
                        read_camera_yaml(tmp_path / "calibration.yaml").K)
 
 
+@pytest.mark.slow
 def test_bag_parameter_replays_a_recording_then_calibrates_and_publishes(launch, spinner, tmp_path):
     """`-p bag.path:=BAG`: views from a recording instead of the topics, then the usual
     calibration, CameraInfo and files, to the recording's ground truth."""

@@ -283,6 +283,7 @@ def test_the_calibration_worker_killed_is_reported_and_replaced(launch, spinner,
     assert all(p.alive() for p in procs), logs(*procs)
 
 
+@pytest.mark.slow
 def test_a_stopped_calibration_worker_times_out_and_is_replaced(launch, spinner, tmp_path):
     """A worker that stops answering (SIGSTOP here; a numerical library stuck in a loop alike)
     must not hold ~/calibrate for ever: after calibration.timeout it is killed and replaced."""

@@ -30,6 +30,7 @@ def test_help_prints_usage_and_exits_0(ros, name):
         assert "Traceback" not in run.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_signals_end_both_nodes_cleanly_while_frames_flow(launch, spinner, sig, tmp_path):
     ns = f"/life_{sig.name.lower()}"
