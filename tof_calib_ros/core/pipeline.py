@@ -657,13 +657,12 @@ def _wiggle_gains(prepared, plane_samples, obj, fit: bundle.Fit, convention: str
     and the views as each period has them: what their distances and their depth off their
     planes say of it (and of a radial offset, where ``radial``). The planes, and so the test,
     need no refit per period: without a wiggle they do not depend on it."""
-    extra = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
     periods = [bias_model.wiggle_period(hz) for hz in WIGGLE_CANDIDATES_HZ]
     depths, floors, _, shapes, radials = _planarize_periods(prepared, plane_samples, fit.state.intrinsics,
                                                             fit.state.bias, convention, periods, radial)
     at_each = [_observations(obj, prepared, depths, floors, [s[k] if s else None for s in shapes], radials)
                for k in range(len(periods))]
-    gains = [bundle.score(views, replace(fit, wiggle_period=period), convention, extra)
+    gains = [bundle.score(views, replace(fit, wiggle_period=period), convention, bundle.WIGGLE)
              for views, period in zip(at_each, periods)]
     return np.array(gains), at_each
 
@@ -749,7 +748,7 @@ def _look_for_wiggle(prepared, plane_samples, obj, fitted: _Fitted, start: bundl
         return found
     stated = bundle.jackknifed(refit.fit, bundle.fold_estimates(refit.observations, refit.fit, convention, CORNER_FOLDS,
                                                                 refit.free, options.loss), refit.free)
-    at = np.isin(stated.free_global, [N_INTRINSICS + t for t in bias_model.TERMS["wiggle"]])
+    at = np.isin(stated.free_global, bundle.WIGGLE)
     cov = stated.covariance[np.ix_(at, at)]
     z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
     evidence["amplitude_chi2"] = round(z2, 3)
@@ -785,7 +784,7 @@ def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free
     radial offset's fx is the plain model's, with the wiggle's slope in it). A wiggle no ToF
     camera has (beyond MAX_WIGGLE_M) is no candidate. Each is one solve from this fit, on the
     views as the search planarized them."""
-    wiggle = [N_INTRINSICS + k for k in bias_model.TERMS["wiggle"]]
+    wiggle = bundle.WIGGLE
     base = [t for t in free if t not in (*wiggle, bundle.RADIAL)]
     # (log weight, views, terms, period): no wiggle, the radial offset, then each period
     models = [(0.0, search.plain, base, None)]
