@@ -197,11 +197,15 @@ def test_a_wrong_square_size_or_depth_unit_is_not_trusted(square, depth_factor):
         v.depth = v.depth * depth_factor
     res = calibrate(views, Board(BOARD.cols, BOARD.rows, square))
     assert not res.ok
-    reason = next(r for r in res.verdict if "the squares look" in r)
+    reason = res.verdict[0]   # the cause leads, before the residuals and spreads it makes
+    assert "the squares look" in reason, res.verdict
     # the depth's unit too large looks like a square as much larger
     implied = float(re.search(r"the depth says ([\d.]+) mm, not the", reason)[1])
     assert implied == pytest.approx(BOARD.square * 1e3 * depth_factor, rel=0.05), reason
     assert res.to_dict()["corner_only_focal"]["fx"] == pytest.approx(CAM.params[0], rel=0.01)
+    # refused at once: no depth model searched for a depth this far off (a wrong unit took 8 minutes)
+    assert any("no wiggle searched for" in r for r in res.model.reasons), res.model.reasons
+    assert not any("no wiggle searched for" in r for r in right.model.reasons), right.model.reasons
 
 
 @pytest.mark.slow
@@ -212,7 +216,8 @@ def test_a_square_a_tenth_off_is_refused_saying_which_way(factor):
     views, _ = _scene(8, 11, noise=sim.Noise(depth=0.002))
     res = calibrate(views, Board(BOARD.cols, BOARD.rows, BOARD.square * factor))
     assert not res.ok, f"a square {factor - 1:+.0%} off was trusted: {res.K[0, 0]:.1f}"
-    reason = next(r for r in res.verdict if "the squares look" in r)
+    reason = res.verdict[0]
+    assert "the squares look" in reason, res.verdict
     # a square given too small makes the depth read long: the squares look larger
     assert f"the squares look {'larger' if factor < 1 else 'smaller'} than the size given" in reason, reason
     implied = float(re.search(r"the depth says ([\d.]+) mm, not the", reason)[1])

@@ -113,11 +113,26 @@ class CalibrationResult:
 
     @property
     def verdict(self) -> list[str]:
-        """Reasons not to trust the calibration; empty when it passes every check."""
+        """Reasons not to trust the calibration, a wrong square size or depth unit first: it explains
+        the residuals and spreads listed after it. Empty when it passes every check."""
         reasons = []
         values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
+        if self.corner_focal is not None and self.depth_focal is not None:
+            for k, name in enumerate(("fx", "fy")):
+                f, c, s = self.depth_focal[k], self.corner_focal[k], self.corner_focal[k + 2]
+                # at the noise's uncertainty: a wrong square tears the views apart, and the
+                # jackknife spread it makes would hide its cause
+                apart = np.hypot(s, self.depth_focal[k + 2])
+                if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
+                    reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
+                                   f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
+                                   + self._squares_look(f / c))
+        scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
+        if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
+            reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
+                           "give: " + self._squares_look(1 + scale))
         if self.pixel_rms > MAX_PIXEL_RMS:
             reasons.append(f"pixel RMS {self.pixel_rms:.2f} px exceeds {MAX_PIXEL_RMS} px")
         if np.isfinite(self.depth_rms) and self.depth_rms > MAX_DEPTH_RMS:
@@ -130,26 +145,12 @@ class CalibrationResult:
             s = self.std.get(name, float("nan"))
             if not np.isfinite(s) or s > MAX_CENTER_REL_STD * size:
                 reasons.append(f"{name} is poorly constrained (std {s:.3g} px): tilt the board more between views")
-        if self.corner_focal is not None and self.depth_focal is not None:
-            for k, name in enumerate(("fx", "fy")):
-                f, c, s = self.depth_focal[k], self.corner_focal[k], self.corner_focal[k + 2]
-                # at the noise's uncertainty: a wrong square tears the views apart, and the
-                # jackknife spread it makes would hide its cause
-                apart = np.hypot(s, self.depth_focal[k + 2])
-                if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
-                    reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
-                                   f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
-                                   + self._squares_look(f / c))
         if self.corner_noise is not None and self.method == "depth" and corners_pulled(self.pixel_noise,
                                                                                         self.corner_noise):
             (ours, _), (alone, _) = self.pixel_noise, self.corner_noise
             reasons.append(f"the corners fit worse with the depth than alone ({ours:.3f} against {alone:.3f} px a "
                            "degree of freedom): the lens model is too small for this lens, or the depth pulls the "
                            "camera off what the corners say (a depth error the model does not explain)")
-        scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
-        if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
-            reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
-                           "give: " + self._squares_look(1 + scale))
         return reasons
 
     def _squares_look(self, ratio: float) -> str:
