@@ -203,9 +203,6 @@ def test_a_wrong_square_size_or_depth_unit_is_not_trusted(square, depth_factor):
     implied = float(re.search(r"the depth says ([\d.]+) mm, not the", reason)[1])
     assert implied == pytest.approx(BOARD.square * 1e3 * depth_factor, rel=0.05), reason
     assert res.to_dict()["corner_only_focal"]["fx"] == pytest.approx(CAM.params[0], rel=0.01)
-    # refused at once: no depth model searched for a depth this far off (a wrong unit took 8 minutes)
-    assert any("no wiggle searched for" in r for r in res.model.reasons), res.model.reasons
-    assert not any("no wiggle searched for" in r for r in right.model.reasons), right.model.reasons
 
 
 @pytest.mark.slow

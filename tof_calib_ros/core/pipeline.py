@@ -1256,23 +1256,14 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     start = bundle.solve(observations, state, convention, [], rounds=1).state
     fitted = _fit(prepared, plane_samples, obj, observations, start, False, options, say)
     asked, found_wiggle = options, None
-    corners = None if corner_fit is None else _CornersAlone(corner_fit, obj, prepared, image_size)
-    # A depth whose level is beyond MAX_CORNER_DEPTH_DISAGREEMENT off the corners is a wrong square
-    # size or depth unit, which the verdict refuses: searching its model and its weight would only
-    # delay that (7.8 minutes for a wrong unit on 60 views, 29 s without; as long again for the
-    # report's halves, whose model is fixed)
-    level = _depth_check(fitted.fit, fitted.depths, fitted.planes, corners, convention).level
-    gross = f"the depth reads {level:+.1%} off the corners' distances: no wiggle searched for, and the depth's " \
-        "weight left as it is" if abs(level) >= MAX_CORNER_DEPTH_DISAGREEMENT else ""
-    if gross:
-        say(gross)
-    if options.depth_bias == "auto" and options.modulation_hz is None and not gross:
+    if options.depth_bias == "auto" and options.modulation_hz is None:
         found_wiggle = _look_for_wiggle(prepared, plane_samples, obj, fitted, start, options, say)
         if found_wiggle.refit is not None:
             options = options if found_wiggle.radial else replace(options, modulation_hz=found_wiggle.hz)
             fitted = found_wiggle.refit
     radial = found_wiggle is not None and found_wiggle.radial
     fit, free, model, depths, planes, observations = fitted
+    corners = None if corner_fit is None else _CornersAlone(corner_fit, obj, prepared, image_size)
     check = _depth_check(fit, depths, planes, corners, convention) \
         if options.depth_bias == "auto" else _DepthCheck()
     # Views whose depth bows off their planes by amounts that differ have an error over distance
@@ -1292,7 +1283,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
                                                               True, options, say, model, free)
     depth_focal, full_depths = _focal(fit), depths   # what the depth says at its full weight
     found = ([] if found_wiggle is None else [found_wiggle.reason]) + [squares_reason] * bool(squares_reason) \
-        + [gross] * bool(gross) + check.reasons
+        + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
     # Where the depth pulls the corners off their fit, its error is one the model does not explain
     # (a wiggle the views' tilts see): its weight falls until they fit about as well as alone; by
@@ -1302,7 +1293,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # the focal length less certain over folds of the views than the corners alone, each view's
     # depth has an error of its own the model does not explain: it falls until it does not.
     inflation = 1.0
-    reason, estimates = (None, None) if gross else _why_yield(observations, fit, free, model, options, corners)
+    reason, estimates = _why_yield(observations, fit, free, model, options, corners)
     full_weight = reason
     while inflation < MAX_DEPTH_INFLATION and reason:
         inflation *= DEPTH_INFLATION_STEP
