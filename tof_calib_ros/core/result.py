@@ -24,6 +24,7 @@ MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
 # downsampled to 205x170 the corners alone are 3.6 % (8 of them) from the depth-aided result,
 # which agrees with the full-resolution one; a square 10 % off moves the depth-aided one 5.6 %.
 MAX_CORNER_DEPTH_DISAGREEMENT = 0.05
+REFUSE_SIGMAS = 5.0   # a difference of focal lengths beyond this many of its standard deviations is no noise
 # The corners must fit about as well with the depth as alone. The depth costs them a little on real
 # data (real Kinect v2 subsets of 3-10 views: up to 1.55 times the corners-alone pixel noise, 0.018 px
 # above it); a lens model too small for the lens or a wrong depth convention costs more (0.03-0.05 px
@@ -50,6 +51,24 @@ def noise_per_dof(pixel_residuals: list[np.ndarray], n_intrinsics: int) -> tuple
     r = np.concatenate([p.ravel() for p in pixel_residuals])
     dof = r.size - 6 * len(pixel_residuals) - n_intrinsics
     return (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan")), int(dof)
+
+
+Focal = tuple[float, float, float, float]   # fx, fy and their standard deviations
+
+
+def focal_disagreements(depth_focal: Focal, corner_focal: Focal) -> list[tuple[str, float, float, float, float]]:
+    """fx and fy where the depth's focal length is beyond MAX_CORNER_DEPTH_DISAGREEMENT and
+    REFUSE_SIGMAS standard deviations of the difference off the corners' alone: (name, the
+    depth's, the corners', their std, the difference's std), each a wrong square size or depth
+    unit the verdict refuses. At the noise's uncertainty: a
+    wrong square tears the views apart, and the jackknife spread it makes would hide its cause."""
+    out = []
+    for k, name in enumerate(("fx", "fy")):
+        f, c, s = depth_focal[k], corner_focal[k], corner_focal[k + 2]
+        apart = float(np.hypot(s, depth_focal[k + 2]))
+        if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, REFUSE_SIGMAS * apart):
+            out.append((name, f, c, s, apart))
+    return out
 
 
 @dataclass
@@ -80,7 +99,7 @@ class CalibrationResult:
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
-    corner_focal: tuple[float, float, float, float] | None = None   # fx, fy, std fx, std fy from the corners alone
+    corner_focal: Focal | None = None   # from the corners alone
     options: CalibrationOptions = field(default_factory=CalibrationOptions)   # as asked
     model: Model = field(default_factory=Model)   # as chosen: distortion, depth terms, plane squares, and why
     square: float = float("nan")   # m, the board's square size as given
@@ -89,7 +108,7 @@ class CalibrationResult:
     noise_std: dict[str, float] = field(default_factory=dict)   # what the corners' and depth's noise alone give
     # fx, fy and what their noise gives them with the depth at its full weight: the focal length the
     # depth says, where it pulled the corners off their fit and the result leans on the corners
-    depth_focal: tuple[float, float, float, float] | None = None
+    depth_focal: Focal | None = None
 
     @property
     def depth_offset(self) -> float:
@@ -120,15 +139,10 @@ class CalibrationResult:
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
         if self.corner_focal is not None and self.depth_focal is not None:
-            for k, name in enumerate(("fx", "fy")):
-                f, c, s = self.depth_focal[k], self.corner_focal[k], self.corner_focal[k + 2]
-                # at the noise's uncertainty: a wrong square tears the views apart, and the
-                # jackknife spread it makes would hide its cause
-                apart = np.hypot(s, self.depth_focal[k + 2])
-                if abs(f - c) > max(MAX_CORNER_DEPTH_DISAGREEMENT * c, 5 * apart):
-                    reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
-                                   f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
-                                   + self._squares_look(f / c))
+            for name, f, c, s, apart in focal_disagreements(self.depth_focal, self.corner_focal):
+                reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
+                               f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
+                               + self._squares_look(f / c))
         scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
         if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
             reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
