@@ -24,7 +24,7 @@ MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
 # downsampled to 205x170 the corners alone are 3.6 % (8 of them) from the depth-aided result,
 # which agrees with the full-resolution one; a square 10 % off moves the depth-aided one 5.6 %.
 MAX_CORNER_DEPTH_DISAGREEMENT = 0.05
-REFUSE_SIGMAS = 5.0   # a difference of focal lengths beyond this many of its standard deviations is no noise
+REFUSE_SIGMAS = 5.0   # a focal length or depth scale off by more than this many standard deviations is no noise
 # The corners must fit about as well with the depth as alone. The depth costs them a little on real
 # data (real Kinect v2 subsets of 3-10 views: up to 1.55 times the corners-alone pixel noise, 0.018 px
 # above it); a lens model too small for the lens or a wrong depth convention costs more (0.03-0.05 px
@@ -60,8 +60,8 @@ def focal_disagreements(depth_focal: Focal, corner_focal: Focal) -> list[tuple[s
     """fx and fy where the depth's focal length is beyond MAX_CORNER_DEPTH_DISAGREEMENT and
     REFUSE_SIGMAS standard deviations of the difference off the corners' alone: (name, the
     depth's, the corners', their std, the difference's std), each a wrong square size or depth
-    unit the verdict refuses. At the noise's uncertainty: a
-    wrong square tears the views apart, and the jackknife spread it makes would hide its cause."""
+    unit the verdict refuses. At the noise's uncertainty: a wrong square tears the views apart,
+    and the jackknife spread it makes would hide its cause."""
     out = []
     for k, name in enumerate(("fx", "fy")):
         f, c, s = depth_focal[k], corner_focal[k], corner_focal[k + 2]
@@ -144,7 +144,7 @@ class CalibrationResult:
                                f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
                                + self._squares_look(f / c))
         scale, s = float(self.depth_bias[1]), self.std.get("depth_scale", 0.0)
-        if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, 5 * s):
+        if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, REFUSE_SIGMAS * s):
             reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
                            "give: " + self._squares_look(1 + scale))
         if self.pixel_rms > MAX_PIXEL_RMS:
