@@ -58,30 +58,37 @@ def test_the_depth_model_inverts_with_a_wiggle(convention):
     np.testing.assert_allclose(depth_bias.true_depth(bias, reported, u, period=1.87), depth, atol=1e-7)
 
 
-def test_a_depth_scale_left_out_is_carried_at_the_datas_own_doubt_of_it():
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_depth_scale_left_out_is_carried_as_far_as_the_data_put_it(seed):
     """A depth scale the model leaves out moves the depth-aided fx by about as much (the fit
-    trusts the depth's scale), whatever the tilts. Widened by the scale, fx's uncertainty is the
-    fit's with the scale free, at the same estimate: the data's own doubt of the scale, about the
-    truth and not the fit, which does not cover a 3 % scale (where the views' depth bows by
-    amounts that differ, the pipeline fits the scale instead: ``_bowl_check``)."""
-    rng = np.random.default_rng(1)
+    trusts the depth's scale), whatever the tilts. Widened by the scale, fx's uncertainty is
+    never below the fit's with the scale free (the data's own doubt of it), and where the data
+    put the scale beyond that doubt it reaches as far as they put it, so a 3 % scale left out
+    is stated, not trusted at the fit's own precision (as it was: 2.4 px stated, 8 px off).
+    Where the depth's scale is right the widening stays near the data's doubt (the views' spread
+    over folds may raise it)."""
+    rng = np.random.default_rng(seed)
     board = Board(6, 5, 0.05)
     obj = board.object_points()
     truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    poses = np.array([[*rng.normal(0, 0.3, 3), -0.12, -0.1, z] for z in (0.8, 1.0, 1.2, 1.4)])
-    scale = 0.03
-    views = []
-    for pose in poses:
-        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
-        views.append(bundle.Observations(obj, project(X, truth).pixels + rng.normal(0, 0.05, (len(obj), 2)),
-                                         (1 + scale) * X[:, 2] + rng.normal(0, 0.002, len(obj))))
-    fit = bundle.solve(views, bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy()), "z",
-                       [0, 1, 2, 3, N_INTRINSICS])
-    moved = fit.state.intrinsics[0] - truth[0]
-    assert abs(moved) > 0.5 * scale * truth[0] and abs(moved) > 10 * fit.covariance[0, 0] ** 0.5
-    wide = bundle.widened(views, fit, "z", N_INTRINSICS + 1)
-    freed = bundle.solve(views, fit.state, "z", [0, 1, 2, 3, N_INTRINSICS, N_INTRINSICS + 1])
-    assert wide.state is fit.state and list(wide.free_global) == list(freed.free_global)
-    assert wide.covariance[0, 0] == pytest.approx(freed.covariance[0, 0], rel=0.2)
-    assert abs(freed.state.intrinsics[0] - truth[0]) < 3 * freed.covariance[0, 0] ** 0.5   # about the truth
-    assert 3 * fit.covariance[0, 0] ** 0.5 < wide.covariance[0, 0] ** 0.5 < abs(moved) / 2
+    poses = np.array([[*rng.normal(0, 0.3, 3), -0.12, -0.1, z] for z in np.linspace(0.8, 1.4, 8)])
+    std = {}
+    for scale in (0.03, 0.0):
+        views = []
+        for pose in poses:
+            X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
+            views.append(bundle.Observations(obj, project(X, truth).pixels + rng.normal(0, 0.05, (len(obj), 2)),
+                                             (1 + scale) * X[:, 2] + rng.normal(0, 0.002, len(obj))))
+        fit = bundle.solve(views, bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy()), "z",
+                           [0, 1, 2, 3, N_INTRINSICS])
+        moved = fit.state.intrinsics[0] - truth[0]
+        wide = bundle.widened(views, fit, "z", N_INTRINSICS + 1, 5)
+        freed = bundle.solve(views, fit.state, "z", [0, 1, 2, 3, N_INTRINSICS, N_INTRINSICS + 1])
+        assert wide.state is fit.state and list(wide.free_global) == list(freed.free_global)
+        std[scale] = wide.covariance[0, 0] ** 0.5
+        assert std[scale] >= 0.99 * freed.covariance[0, 0] ** 0.5
+        assert abs(moved) < 2 * std[scale]   # the truth within 2 stated sigmas
+        if scale:
+            assert abs(moved) > 0.5 * scale * truth[0] and abs(moved) > 10 * fit.covariance[0, 0] ** 0.5
+            assert abs(freed.state.intrinsics[0] - truth[0]) < 3 * freed.covariance[0, 0] ** 0.5   # about the truth
+    assert std[0.0] < 0.4 * std[0.03]

@@ -10,6 +10,9 @@ it, and their focal length rests on the depth's scale; the all-view principal po
 from OpenCV's: the issue's targets for these are not met (the xfail tests below, which fail
 the run if they start to pass).
 """
+import importlib.util
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -57,6 +60,15 @@ def few(views):
     """Five disjoint sets of 5-6 views, each by ours and by OpenCV."""
     return [(calibrate(views[start::9], BOARD), calibrate(views[start::9], BOARD, method="traditional"))
             for start in range(5)]
+
+
+def _benchmark():
+    """``benchmarks/kinect_real.py``, whose downsampling the low-resolution test shares."""
+    path = Path(__file__).parents[1] / "benchmarks" / "kinect_real.py"
+    spec = importlib.util.spec_from_file_location("kinect_real", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _focal_error(result, reference) -> float:
@@ -138,3 +150,20 @@ def test_the_halves_agree_within_0_3_percent(views, even):
 @pytest.mark.xfail(strict=True, reason="measured 3.3 and 2.7 px from OpenCV's principal point")
 def test_all_views_put_the_principal_point_within_3_px_of_opencvs(ours_all, reference):
     assert np.all(np.abs(ours_all.K[:2, 2] - reference.K[:2, 2]) < 3), (ours_all.K[:2, 2], reference.K[:2, 2])
+
+
+@pytest.mark.parametrize("which", [slice(None), slice(0, None, 2), slice(1, None, 2)], ids=["all", "even", "odd"])
+def test_at_205x170_a_trusted_focal_length_holds_the_full_resolution_one_within_2_sigmas(kinect_dir, reference,
+                                                                                         which):
+    """Downsampled by 0.4 (a PMD-class 205x170, as ``kinect_real.py`` does it), the views bow
+    alike (-61 +- 13 mm over all of them) and their depth reads 1.4 % short of the corners, too
+    little for the depth check to take a scale there: fx rests on the depth's scale, 1.7 % below
+    the full-resolution reference. Its uncertainty, widened for the scale left out, was the
+    data's doubt of the scale alone (145.44 +- 0.33, trusted 7 sigmas off); it now reaches as far
+    as the data put the scale (+- 1.38: refused, fy being as poorly constrained)."""
+    scale = 0.4
+    views = _benchmark().load(kinect_dir, scale)[which]
+    res = calibrate(views, BOARD)
+    truth = np.diag(reference.K)[:2] * scale   # the principal point aside, focal lengths scale plainly
+    z = (np.diag(res.K)[:2] - truth) / np.array([res.std["fx"], res.std["fy"]])
+    assert not res.ok or np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z)

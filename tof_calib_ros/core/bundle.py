@@ -476,13 +476,22 @@ def jackknifed(fit: Fit, estimates: np.ndarray | None, estimated) -> Fit:
     return replace(fit, covariance=fit.covariance * np.outer(gain, gain))
 
 
-def widened(views: list[Observations], fit: Fit, convention: str, term: int) -> Fit:
-    """The fit at the same estimate, with the uncertainty of a ``term`` it leaves out (at its value,
-    within its prior) carried into the covariance: for a term the data may hold but cannot fix."""
-    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, np.r_[fit.free_global, term], True,
-                      fit.weights, wiggle_period=fit.wiggle_period)
-    cov, _ = _covariance(problem, fit.state, len(views), True)
-    return replace(fit, covariance=cov, free_global=problem.free_global)
+def widened(views: list[Observations], fit: Fit, convention: str, term: int, folds: int,
+            loss: str | None = None) -> Fit:
+    """The fit at the same estimate, with the uncertainty of a ``term`` it leaves out carried into
+    the covariance: for a term the data may hold but cannot fix. The term counts as uncertain as
+    the data leave it (the fit with it free, its spread over ``folds`` of the views included) or
+    as far as they put it from the fit's value, whichever is more: at the data's doubt alone, a
+    depth scale the real Kinect v2 views at 205x170 put 2-4 of its standard deviations off left
+    fx 1.7 % low, trusted at 0.2 %."""
+    free = np.r_[fit.free_global, term]
+    loose = solve(views, fit.state, convention, free, loss=loss, wiggle_period=fit.wiggle_period)
+    cov = jackknifed(loose, fold_estimates(views, loose, convention, folds, free, loss), free).covariance
+    at = len(free) - 1
+    shift = np.r_[loose.state.intrinsics, loose.state.bias][term] - np.r_[fit.state.intrinsics, fit.state.bias][term]
+    along = cov[:, at] / cov[at, at]   # how each parameter moves with the term
+    cov = cov + np.outer(along, along) * max(shift ** 2 - cov[at, at], 0.0)
+    return replace(fit, covariance=cov, free_global=loose.free_global)
 
 
 def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:

@@ -1319,8 +1319,9 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if (bowl is not None or radial) and N_INTRINSICS + 1 not in free:
         # a bow common to the views, or the radial offset taken for it: a wiggle's bows alike too
         # near frontal, and its slope is a scale; the data may fix the scale about the truth, not
-        # about this fit's (a 15 mm wiggle taken for a radial offset put fx 2.4 % off)
-        fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1)
+        # about this fit's (a 15 mm wiggle taken for a radial offset put fx 2.4 % off), and as far
+        # from it as they put the scale
+        fit = bundle.widened(observations, fit, convention, N_INTRINSICS + 1, CORNER_FOLDS, options.loss)
     if found_wiggle is not None:
         alone = fit
         fit = _over_wiggles(observations, fit, free, options, found_wiggle)
