@@ -159,8 +159,8 @@ def test_at_205x170_a_trusted_focal_length_holds_the_full_resolution_one_within_
     alike (-61 +- 13 mm over all of them) and their depth reads 1.4 % short of the corners, too
     little for the depth check to take a scale there: fx rests on the depth's scale, 1.7 % below
     the full-resolution reference. Its uncertainty, widened for the scale left out, was the
-    data's doubt of the scale alone (145.44 +- 0.33, trusted 7 sigmas off); it now reaches as far
-    as the data put the scale (+- 1.38: refused, fy being as poorly constrained)."""
+    data's doubt of the scale alone (145.44 +- 0.33, trusted 8 sigmas off); it now reaches as far
+    as the data put the scale (+- 1.39: refused, fy being as poorly constrained)."""
     scale = 0.4
     views = _benchmark().load(kinect_dir, scale)[which]
     res = calibrate(views, BOARD)
