@@ -31,6 +31,7 @@ from threadpoolctl import threadpool_limits
 from ..core.board import Board
 from ..core.detection import Detection
 from ..core.errors import CalibrationError
+from ..core.threads import single_threaded
 from .collector import CollectorConfig, Outcome, ViewCollector
 from .tracking import BoardTracker, accurate_detect, quick_locate
 
@@ -283,14 +284,9 @@ class Replay:
             return [f.amplitude_source() for f in chunk], self.board, config
 
         if self.workers == 1:   # here, as single-threaded as a worker: one worker means one core
-            threads = cv2.getNumThreads()
-            cv2.setNumThreads(1)
-            try:
-                with threadpool_limits(1):
-                    for chunk in chunks:
-                        yield from zip(chunk, _locate_chunk(*work(chunk)))
-            finally:
-                cv2.setNumThreads(threads)
+            with single_threaded():
+                for chunk in chunks:
+                    yield from zip(chunk, _locate_chunk(*work(chunk)))
             return
         with worker_context().Pool(self.workers, initializer=init_worker) as pool:
             pending: deque = deque()

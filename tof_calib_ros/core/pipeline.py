@@ -21,7 +21,6 @@ import numpy as np
 from scipy.stats import chi2 as scipy_chi2
 from scipy.stats import f as scipy_f
 from scipy.stats import norm as scipy_norm
-from threadpoolctl import threadpool_limits
 
 from . import bundle
 from . import depth_bias as bias_model
@@ -54,6 +53,7 @@ from .result import (
     focal_disagreements,
     noise_per_dof,
 )
+from .threads import single_threaded
 from .traditional import Traditional, calibrate_opencv
 
 MIN_PARALLEL_SPREAD_DEG = 0.05  # about the precision of a plane-fit normal
@@ -483,8 +483,6 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     Raises CalibrationError with the reason when the options are wrong or the views cannot be
     calibrated; check ``result.verdict`` before trusting a result.
     """
-    # The linear algebra here is small: BLAS threads only contend (with each other and with
-    # whatever else runs, a camera driver say), which on two cores made solves 300x slower.
     _check_arguments(views, board, image_size, depth_units, min_views, progress)
     options = CalibrationOptions(method, depth_convention, depth_units, depth_bias, distortion, loss, plane_squares,
                                  min_views, modulation_hz)
@@ -500,7 +498,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
 
 
 def _calibrate_with_loss(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
-    with threadpool_limits(1):
+    with single_threaded():
         result = _calibrate(views, board, image_size, options, progress)
         if options.loss is None:
             return result
