@@ -102,6 +102,11 @@ class State:
     def copy(self) -> State:
         return State(self.intrinsics.copy(), self.bias.copy(), self.poses.copy())
 
+    @property
+    def globals_(self) -> np.ndarray:
+        """The intrinsics then the depth terms: what ``Fit.free_global`` indexes."""
+        return np.r_[self.intrinsics, self.bias]
+
 
 @dataclass
 class Fit:
@@ -170,7 +175,7 @@ class Problem:
 
     def unpack(self, x: np.ndarray, base: State) -> State:
         s = base.copy()
-        flat = np.concatenate([s.intrinsics, s.bias])
+        flat = s.globals_
         flat[self.free_global] = x[: len(self.free_global)]
         s.intrinsics, s.bias = flat[:N_INTRINSICS], flat[N_INTRINSICS:]
         if self.free_poses:
@@ -178,7 +183,7 @@ class Problem:
         return s
 
     def pack(self, state: State) -> np.ndarray:
-        flat = np.concatenate([state.intrinsics, state.bias])
+        flat = state.globals_
         parts = [flat[self.free_global]]
         if self.free_poses:
             parts.append(state.poses.ravel())
@@ -454,7 +459,7 @@ def fold_estimates(views: list[Observations], fit: Fit, convention: str, folds: 
     for keep in kept:
         state = State(fit.state.intrinsics.copy(), fit.state.bias.copy(), fit.state.poses[keep].copy())
         sub = solve([views[i] for i in keep], state, convention, estimated, loss=loss, wiggle_period=fit.wiggle_period)
-        estimates.append(np.r_[sub.state.intrinsics, sub.state.bias])
+        estimates.append(sub.state.globals_)
     return np.array(estimates)
 
 
@@ -488,7 +493,7 @@ def widened(views: list[Observations], fit: Fit, convention: str, term: int, fol
     loose = solve(views, fit.state, convention, free, loss=loss, wiggle_period=fit.wiggle_period)
     cov = jackknifed(loose, fold_estimates(views, loose, convention, folds, free, loss), free).covariance
     at = len(free) - 1
-    shift = np.r_[loose.state.intrinsics, loose.state.bias][term] - np.r_[fit.state.intrinsics, fit.state.bias][term]
+    shift = loose.state.globals_[term] - fit.state.globals_[term]
     along = cov[:, at] / cov[at, at]   # how each parameter moves with the term
     cov = cov + np.outer(along, along) * max(shift ** 2 - cov[at, at], 0.0)
     return replace(fit, covariance=cov, free_global=loose.free_global)

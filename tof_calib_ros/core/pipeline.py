@@ -799,7 +799,7 @@ def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free
     # radial offset the search took
     chosen = len(models) - len(search.gains) + int(np.argmax(search.gains)) if wiggle[0] in free \
         else 1 if bundle.RADIAL in free else 0
-    here = np.r_[fit.state.intrinsics, fit.state.bias][fit.free_global]
+    here = fit.state.globals_[fit.free_global]
     state = fit.state.copy()
     state.bias[bias_model.TERMS["wiggle"] + bias_model.TERMS["radial"]] = 0.0
     inflation = observations[0].depth_inflation
@@ -813,7 +813,7 @@ def _over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free
             continue
         # the wiggle's own terms mean another function at another period: only the rest compare
         delta = np.where(np.isin(fit.free_global, wiggle), 0.0,
-                         np.r_[there.state.intrinsics, there.state.bias][fit.free_global] - here)
+                         there.state.globals_[fit.free_global] - here)
         total += weight
         spread += weight * np.outer(delta, delta)
     if total <= 0:   # the chosen model and every other counted are all but impossible: nothing to weigh
@@ -846,7 +846,7 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
     inflation = observations[0].depth_inflation
     convention = options.depth_convention
     for round_ in range(MAX_OUTER_ROUNDS):
-        before = np.r_[state.intrinsics, state.bias]
+        before = state.globals_
         fit = bundle.solve(observations, state, convention, free, loss=options.loss,
                            wiggle_period=options.wiggle_period)
         state = fit.state
@@ -856,7 +856,7 @@ def _joint(prepared, plane_samples, obj, observations, state, free, options: Cal
                                                                   state.bias, convention, options.wiggle_period,
                                                                   _radial_may_enter(options))
         observations = _observations(obj, prepared, depths, floors, wiggles, radials, inflation)
-        change = np.abs(np.r_[state.intrinsics, state.bias] - before)[fit.free_global]
+        change = np.abs(state.globals_ - before)[fit.free_global]
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         # the first round starts where the model's choice left it, on the same observations: only
         # from the second does a small move say the observations have stopped changing
