@@ -56,6 +56,23 @@ def test_the_same_views_give_the_same_calibration_to_the_last_bit():
     assert cv2.getNumThreads() == threads
 
 
+def test_the_traditional_baseline_fits_the_lens_model_asked_for():
+    """A lens with k3: asked for the full model, OpenCV's baseline recovers it from noiseless
+    corners; by default it fixes k3 as ROS camera_calibration does, and says which it fitted."""
+    cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0.2]), 200, 200)
+    rng = np.random.default_rng(4)
+    poses = sim.random_poses(cam, BOARD, 8, rng, distance=(0.55, 0.9), max_tilt_deg=35)
+    views = [View(f.depth, f.corners) for f in (sim.render(cam, BOARD, r, t) for r, t in poses)]
+    full = calibrate(views, BOARD, method="traditional", distortion="full")
+    np.testing.assert_allclose(np.r_[np.diag(full.K)[:2], full.K[:2, 2], full.D], cam.params, atol=1e-4)
+    assert full.model.distortion == "full"
+    default = calibrate(views, BOARD, method="traditional")
+    assert default.model.distortion == "plumb_bob" and default.D[4] == 0
+    assert default.pixel_rms > 100 * full.pixel_rms   # k3 left out leaves its trace in the residuals
+    radial = calibrate(views, BOARD, method="traditional", distortion="k1k2")
+    assert radial.model.distortion == "k1k2" and np.all(radial.D[2:] == 0)
+
+
 def test_four_corners_three_images_where_opencv_refuses():
     # Four corners cannot tell lens distortion from focal length, so the camera has none here.
     cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)

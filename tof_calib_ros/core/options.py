@@ -27,9 +27,10 @@ class CalibrationOptions:
     """``depth_bias``: 'auto' (the offset, and scale, tilt and a radial offset where the data call
     for them), 'none', or terms from 'offset', 'scale', 'tilt', 'wiggle', 'radial' joined by '+'
     ('radial', an offset in the light's path, only for z-depth: in radial depth it is the offset).
-    ``distortion``: 'auto' (the plumb_bob terms the data call for) or a preset of
-    ``DISTORTION_TERMS``. ``plane_squares``: 'auto' (the whole board unless the black squares read
-    apart from the white), 'white' (the paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'.
+    ``distortion``: 'auto' (the terms the data call for; with method 'traditional', plumb_bob,
+    ROS camera_calibration's default) or a preset of ``DISTORTION_TERMS``. ``plane_squares``:
+    'auto' (the whole board unless the black squares read apart from the white), 'white' (the
+    paper's) or 'all'. ``loss``: None, 'huber' or 'cauchy'.
     ``modulation_hz``: the camera's modulation frequency, which sets the period of its wiggling
     error; given, 'auto' always estimates a wiggling term; not given, 'auto' looks for one over
     the periods ToF cameras have and takes it where the data call for it (see

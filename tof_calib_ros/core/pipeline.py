@@ -441,12 +441,14 @@ def _std(fit: bundle.Fit) -> dict[str, float]:
     return std
 
 
-def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional, convention: str) -> bundle.Fit:
-    """OpenCV's solution with the uncertainties of a corners-only fit, from the sparse joint fit
-    (calibrateCameraExtended's dense covariance takes 10x calibrateCamera's time at 200 views)."""
+def _corner_fit(obj: list[np.ndarray], views: list[_Prepared], trad: Traditional, convention: str,
+                lens: str) -> bundle.Fit:
+    """OpenCV's solution (``lens``: the distortion terms it fitted) with the uncertainties of a
+    corners-only fit, from the sparse joint fit (calibrateCameraExtended's dense covariance
+    takes 10x calibrateCamera's time at 200 views)."""
     state = bundle.State(trad.intrinsics.copy(), np.zeros(bias_model.N_BIAS), trad.poses.copy())
     nodepth = [bundle.Observations(o, v.corners, np.full(len(o), np.nan)) for o, v in zip(obj, views)]
-    return bundle.solve(nodepth, state, convention, [0, 1, 2, 3, 4, 5, 6, 7], rounds=1, max_iter=0)
+    return bundle.solve(nodepth, state, convention, [0, 1, 2, 3, *DISTORTION_TERMS[lens]], rounds=1, max_iter=0)
 
 
 def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
@@ -475,7 +477,8 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     """Calibrate a ToF camera from checkerboard views.
 
     ``image_size`` is (width, height), taken from the depth images when not given.
-    ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline);
+    ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline,
+    with the ``distortion`` preset asked for);
     ``'depth'`` is the depth-aided method. The model is chosen by the data where an option is
     'auto' (the defaults): the distortion terms, the depth error terms and the squares the depth
     planes use; see ``CalibrationOptions`` for the choices, and ``result.model`` for what was
@@ -1164,8 +1167,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     obj = [board.object_points(v.ids) for v in prepared]
     notes: list[str] = []
     trad: Traditional | None = None
+    # the baseline fits the lens model asked for; the depth method starts from ROS's default
+    lens = options.distortion if options.method == "traditional" and options.distortion != "auto" else "plumb_bob"
     try:
-        trad = calibrate_opencv(obj, [v.corners for v in prepared], image_size)
+        trad = calibrate_opencv(obj, [v.corners for v in prepared], image_size, lens)
         say(f"traditional calibration: fx={trad.intrinsics[0]:.2f} fy={trad.intrinsics[1]:.2f}, "
             f"RMS {trad.rms:.3f} px")
     except CalibrationError as exc:
@@ -1174,9 +1179,9 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         notes.append(f"{exc}; initialised from the depth data instead")
         say(notes[-1])
 
-    corner_fit = None if trad is None else _corner_fit(obj, prepared, trad, convention)
+    corner_fit = None if trad is None else _corner_fit(obj, prepared, trad, convention, lens)
     if options.method == "traditional":
-        model = Model(distortion="plumb_bob", depth_bias="none", plane_squares="white")
+        model = Model(distortion=lens, depth_bias="none", plane_squares="white")
         return _result(options, model, board, image_size, corner_fit, prepared, None, rejected, notes)
 
     # Choose each view's plane samples once (valid depth, RANSAC inliers); a view whose depth is

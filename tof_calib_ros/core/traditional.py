@@ -9,8 +9,12 @@ import numpy as np
 from .camera import pack_intrinsics, project, transform
 from .errors import CalibrationError
 
-# ROS camera_calibration's default: k1, k2, p1, p2 free, k3 fixed.
-OPENCV_FLAGS = cv2.CALIB_FIX_K3
+# The distortion presets (options.DISTORTION_TERMS) as OpenCV's flags. The baseline's is
+# plumb_bob, ROS camera_calibration's default: k1, k2, p1, p2 free, k3 fixed.
+_NO_TANGENTIAL = cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
+OPENCV_FLAGS = {"none": _NO_TANGENTIAL | cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2,
+                "k1": _NO_TANGENTIAL | cv2.CALIB_FIX_K2, "k1k2": _NO_TANGENTIAL,
+                "plumb_bob": cv2.CALIB_FIX_K3, "full": 0}
 
 
 @dataclass
@@ -21,13 +25,14 @@ class Traditional:
 
 
 def calibrate_opencv(object_points: list[np.ndarray], pixels: list[np.ndarray],
-                     image_size: tuple[int, int], flags: int = OPENCV_FLAGS) -> Traditional:
+                     image_size: tuple[int, int], distortion: str = "plumb_bob") -> Traditional:
     """cv2.calibrateCamera, with its refusals and divergences turned into CalibrationError."""
     w, h = image_size
     obj = [np.asarray(o, dtype=np.float32).reshape(-1, 1, 3) for o in object_points]
     img = [np.asarray(p, dtype=np.float32).reshape(-1, 1, 2) for p in pixels]
     try:
-        rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img, (int(w), int(h)), None, None, flags=flags)
+        rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img, (int(w), int(h)), None, None,
+                                                     flags=OPENCV_FLAGS[distortion])
     except cv2.error as exc:
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unknown error"
         raise CalibrationError(f"OpenCV calibration refused the views: {reason}") from exc

@@ -178,8 +178,8 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
     # corners a robust fit dropped stay out.
     known = {d.index: View(views[d.index].depth, d.measured, d.ids, views[d.index].amplitude) for d in data}
     used = [d.index for d in data]
-    if result.method == "depth":
-        other = _calibrate([known[i] for i in used], board, result, "traditional", options)
+    if result.method == "depth":   # the baseline as ROS camera_calibration runs it, whatever lens ours chose
+        other = _calibrate([known[i] for i in used], board, result, "traditional", {**options, "distortion": "auto"})
     else:   # a traditional result says nothing of the depth model: the depth method's defaults
         other = _calibrate([known[i] for i in used], board, result, "depth",
                            {k: result.options.to_dict()[k] for k in ("depth_units", "loss")})
