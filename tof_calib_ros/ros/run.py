@@ -3,9 +3,12 @@
 rclpy's own signal handler shuts the context down the moment SIGINT arrives, while callbacks
 may still be publishing: the simulated camera then ended every Ctrl-C with "RCLError: Failed to
 publish: publisher's context is invalid" and exit 1. Here SIGINT and SIGTERM stop the executor
-first (a KeyboardInterrupt in the spinning thread), running callbacks finish, the node is
-destroyed, and only then is the context shut down: exit 0, no traceback. A signal during start-up
-ends the node the same way. Whatever a thread is doing, a stop ends the process within
+first, running callbacks finish, the node is destroyed, and only then is the context shut down:
+exit 0, no traceback. A signal during start-up ends the node the same way, once it has started.
+The signal only raises a flag that the spinning loop reads between callbacks: raised as a
+KeyboardInterrupt it could land inside the thread pool's submit, between a new thread's start
+and its registration for the interpreter's exit, which then waited for that thread forever (a
+SIGTERM in CI, 2026-11-27). Whatever a thread is doing, a stop ends the process within
 ``STOP_DEADLINE_S``: past it, the threads still running are printed and the process exits 1.
 
 ``Executor`` is the multi-threaded executor the calibration node needs on Jazzy (see its doc).
@@ -38,6 +41,7 @@ from ..core.errors import CalibrationError
 
 STOP_TIMEOUT_S = 5.0   # callbacks still running when a signal comes get this long to finish
 STOP_DEADLINE_S = 15.0  # the whole stop, threads joined at the interpreter's exit included
+SPIN_PERIOD_S = 0.1    # the longest a stop waits for the executor to look up from an idle wait
 
 
 class Executor(MultiThreadedExecutor):
@@ -89,10 +93,11 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
         print(usage(name, doc, parameters))
         return 0
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    # A process started in the background of a script inherits SIGINT ignored, and Python then
-    # leaves it so: such a node could not be stopped the way launch stops nodes.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)   # SIGTERM ends the node as SIGINT does
+    # Set here, not inherited: a process started in the background of a script inherits SIGINT
+    # ignored, and such a node could not be stopped the way launch stops nodes.
+    stop: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, _frame: stop.append(signum))
+    signal.signal(signal.SIGTERM, lambda signum, _frame: stop.append(signum))   # as SIGINT
     node = spinner = None
     try:
         try:
@@ -102,9 +107,8 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
             return 1
         spinner = executor()
         spinner.add_node(node)
-        spinner.spin()
-    except KeyboardInterrupt:
-        pass
+        while not stop and rclpy.ok():
+            spinner.spin_once(timeout_sec=SPIN_PERIOD_S)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not cut the clean-up short
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
