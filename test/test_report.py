@@ -219,6 +219,26 @@ def test_where_opencv_refuses_the_report_says_so(tmp_path):
     _check_images(page, at_least=6)
 
 
+def test_a_lens_other_than_the_baseline_s_is_compared_with_opencv_fitting_it_too(tmp_path):
+    """Ours fitted k3; the baseline fixes it as ROS does. The report also shows OpenCV with k3 and
+    how far the principal point is from it, the numbers those of an independent calibration."""
+    views = _scene(8, 3)
+    result = calibrate(views, BOARD, distortion="full")
+    page = _Page(write_report(tmp_path / "r.html", views, BOARD, result).read_text("utf-8"))
+    same = calibrate(views, BOARD, method="traditional", distortion="full")
+    text = page.sections["comparison"]
+    assert "chose the full lens terms" in text, text
+    shown = re.search(r"cx (\S+) ± \S+, cy (\S+) ± \S+ px: the depth-aided principal point is (\S+), (\S+) px",
+                      text)
+    assert shown, text
+    cx, cy, dx, dy = (float(g) for g in shown.groups())
+    assert _shows(f"{cx:.2f}", same.K[0, 2]) and _shows(f"{cy:.2f}", same.K[1, 2])
+    assert _shows(f"{dx:.2f}", result.K[0, 2] - same.K[0, 2]) and _shows(f"{dy:.2f}", result.K[1, 2] - same.K[1, 2])
+    plumb = calibrate(views, BOARD, distortion="plumb_bob")
+    other = _Page(write_report(tmp_path / "p.html", views, BOARD, plumb).read_text("utf-8"))
+    assert "lens terms" not in other.sections["comparison"]   # the baseline's own lens: nothing to add
+
+
 def test_a_whole_board_calibration_is_recalibrated_on_the_whole_board(tmp_path):
     views = _scene(6, 4)
     result = calibrate(views, BOARD, distortion="plumb_bob", plane_squares="all")

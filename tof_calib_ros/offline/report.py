@@ -93,6 +93,8 @@ class _Comparison:
     halves: tuple[CalibrationResult | str, CalibrationResult | str] | None
     half_views: tuple[list[int], list[int]]      # the caller's view indices of each half
     skipped: str = ""                            # why there is no cross-validation
+    # OpenCV fitting the lens terms the depth-aided result chose, where those are not the baseline's
+    same_lens: CalibrationResult | str | None = None
 
 
 def write_report(path, views: Sequence[View], board: Board, result: CalibrationResult, *,
@@ -178,8 +180,11 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
     # corners a robust fit dropped stay out.
     known = {d.index: View(views[d.index].depth, d.measured, d.ids, views[d.index].amplitude) for d in data}
     used = [d.index for d in data]
+    same_lens = None
     if result.method == "depth":   # the baseline as ROS camera_calibration runs it, whatever lens ours chose
         other = _calibrate([known[i] for i in used], board, result, "traditional", {**options, "distortion": "auto"})
+        if not isinstance(other, str) and other.model.distortion != result.model.distortion:
+            same_lens = _calibrate([known[i] for i in used], board, result, "traditional", options)
     else:   # a traditional result says nothing of the depth model: the depth method's defaults
         other = _calibrate([known[i] for i in used], board, result, "depth",
                            {k: result.options.to_dict()[k] for k in ("depth_units", "loss")})
@@ -187,9 +192,9 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
     if len(used) < MIN_CV_VIEWS:
         return _Comparison(other, None, half_views,
                            f"skipped: the calibration used {len(used)} views; a cross-validation needs at least "
-                           f"{MIN_CV_VIEWS} (three a half)")
+                           f"{MIN_CV_VIEWS} (three a half)", same_lens)
     halves = tuple(_calibrate([known[i] for i in idx], board, result, result.method, options) for idx in half_views)
-    return _Comparison(other, halves, half_views)
+    return _Comparison(other, halves, half_views, same_lens=same_lens)
 
 
 def _half_ratios(result: CalibrationResult, comparison: _Comparison) -> list[tuple[str, float, float, float]] | None:
@@ -640,7 +645,27 @@ def _section_comparison(result: CalibrationResult, comparison: _Comparison) -> s
             + _table("comparison", ["parameter", "depth-aided", "± std", "traditional", "± std",
                                     "depth-aided − traditional", "unit"], rows)
             + _figure(fig, "traditional vs depth-aided", "The focal lengths and principal point of both methods, "
-                      "with one standard deviation."))
+                      "with one standard deviation.")
+            + _same_lens(depth, comparison.same_lens))
+
+
+def _same_lens(depth: CalibrationResult, same: CalibrationResult | str | None) -> str:
+    """The principal point beside OpenCV's with the depth-aided result's lens terms: it trades with
+    them (on the Kinect v2 views k3 alone moves OpenCV's by 1.4 px), so part of a difference from
+    the k3-fixed baseline is the lens model's, not the depth's."""
+    lens = _e(depth.model.distortion)
+    if same is None:
+        return ""
+    if isinstance(same, str):
+        return f'<p class="note">OpenCV fitting the same lens terms ({lens}) failed: {_e(same)}</p>'
+    apart = depth.K[:2, 2] - same.K[:2, 2]
+    sigma = np.hypot([depth.std["cx"], depth.std["cy"]], [same.std["cx"], same.std["cy"]])
+    return (f'<p class="note">The depth-aided calibration chose the {lens} lens terms. OpenCV fitting the same '
+            f"terms gives fx {same.K[0, 0]:.2f}, fy {same.K[1, 1]:.2f}, cx {same.K[0, 2]:.2f} ± {same.std['cx']:.2f}, "
+            f"cy {same.K[1, 2]:.2f} ± {same.std['cy']:.2f} px: the depth-aided principal point is "
+            f"{apart[0]:+.2f}, {apart[1]:+.2f} px from it ({abs(apart[0]) / sigma[0]:.1f} and "
+            f"{abs(apart[1]) / sigma[1]:.1f} standard deviations of the difference). The principal point "
+            "trades with the lens terms, so part of its difference from the table's is the lens model's.</p>")
 
 
 def _section_cross_validation(result: CalibrationResult, comparison: _Comparison) -> str:
