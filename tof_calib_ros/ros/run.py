@@ -96,8 +96,8 @@ def run(name: str, make_node: Callable[[], Node], doc: str, parameters: Mapping[
     # Set here, not inherited: a process started in the background of a script inherits SIGINT
     # ignored, and such a node could not be stopped the way launch stops nodes.
     stop: list[int] = []
-    signal.signal(signal.SIGINT, lambda signum, _frame: stop.append(signum))
-    signal.signal(signal.SIGTERM, lambda signum, _frame: stop.append(signum))   # as SIGINT
+    for sig in (signal.SIGINT, signal.SIGTERM):   # SIGTERM ends the node as SIGINT does
+        signal.signal(sig, lambda signum, _frame: stop.append(signum))
     node = spinner = None
     try:
         try:
