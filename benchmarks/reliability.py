@@ -383,7 +383,7 @@ def faults(log=print) -> dict:
     many ended in a one-line refusal or worked, tracebacks, and data lost (a reader seeing a mixed
     or damaged calibration set, a good set changed by a failed run, a frame lost that was readable)."""
     from tof_calib_ros import Board, sim
-    from tof_calib_ros.core.pipeline import View
+    from tof_calib_ros.core.inputs import View
     from tof_calib_ros.files.calibration_file import save_views
 
     rows: dict[str, dict] = {}

@@ -11,7 +11,7 @@ import pytest
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
 from tof_calib_ros.collect.replay import FrameError
-from tof_calib_ros.core.pipeline import MAX_DEPTH_M, depth_in_metres
+from tof_calib_ros.core.inputs import MAX_DEPTH_M, depth_in_metres
 from tof_calib_ros.files.image_decode import MAX_PIXELS, ImageTooLarge, decode_image
 from tof_calib_ros.files.image_folder import scan
 from tof_calib_ros.offline.cli import EXIT_OK, main

@@ -125,8 +125,8 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
 
     from tof_calib_ros.core import bundle, pipeline
     seen = []
-    original = pipeline._over_wiggles
-    monkeypatch.setattr(pipeline, "_over_wiggles", lambda *a: seen.append(a) or original(*a))
+    original = pipeline.over_wiggles
+    monkeypatch.setattr(pipeline, "over_wiggles", lambda *a: seen.append(a) or original(*a))
     lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
     noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=1.0)
     calibrate(_views(lens, 3, 9, seed=1, tilt=5.0, noise=noise), BOARD)
@@ -406,7 +406,7 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     the plane of the depth without it. Placed on the fitted plane (which holds the wiggle's planar
     part) the model was 0.2-0.35 mm off, a depth error of the fit's own making that near frontal
     moved fx by up to 1 px."""
-    from tof_calib_ros.core import bundle, pipeline
+    from tof_calib_ros.core import bundle, model_choice, view_planes
     lens = np.array([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0])
     camera = sim.SimCamera(lens, 200, 200)
     period, phase = depth_bias.wiggle_period(20e6), 5.57
@@ -417,19 +417,19 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     views = [View(f.depth, f.corners[ids], ids)
              for f in (sim.render(camera, BOARD, r, t, noise=noise, rng=rng) for r, t in poses)]
     seen = {}
-    joint = pipeline._joint
+    joint = model_choice.joint
 
     def spy(prepared, plane_samples, obj, *args):
         seen.update(prepared=prepared, samples=plane_samples, obj=obj)
         return joint(prepared, plane_samples, obj, *args)
 
-    monkeypatch.setattr(pipeline, "_joint", spy)
+    monkeypatch.setattr(model_choice, "joint", spy)
     calibrate(views, BOARD, modulation_hz=20e6)
     intr = np.r_[lens[:8], 0.0]
     bias = np.r_[0, 0, 0, 0, 0.015 * np.cos(phase), 0.015 * np.sin(phase), 0]
-    depths, floors, _, wiggles, radials = pipeline._planarize_all(seen["prepared"], seen["samples"], intr, bias, "z",
-                                                                  period)
-    obs = pipeline._observations(seen["obj"], seen["prepared"], depths, floors, wiggles, radials)
+    depths, floors, _, wiggles, radials = view_planes.planarize_all(seen["prepared"], seen["samples"], intr, bias,
+                                                                    "z", period)
+    obs = view_planes.view_observations(seen["obj"], seen["prepared"], depths, floors, wiggles, radials)
     truth = bundle.State(intr, bias, np.array([np.r_[np.ravel(r), np.ravel(t)] for r, t in poses]))
     problem = bundle.Problem(obs, "z", np.full(5, 0.01), np.full(5, 1e-3), [0, 1, 2, 3], True, None, period)
     _, ddep, _, _ = problem.raw(truth)

@@ -19,7 +19,7 @@ from hypothesis.extra import numpy as hnp
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
 from tof_calib_ros.collect.collector import CollectorConfig
-from tof_calib_ros.core.pipeline import MAX_DEPTH_M
+from tof_calib_ros.core.inputs import MAX_DEPTH_M
 from tof_calib_ros.files.calibration_file import CalibrationFileError, read_camera_yaml, write_camera_yaml
 from tof_calib_ros.files.image_decode import ENCODINGS, ImageError, decode_image, depth_to_metres
 

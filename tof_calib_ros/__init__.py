@@ -12,7 +12,8 @@ rclpy). This module is the public API and imports ``core`` only.
 """
 from .core.board import Board
 from .core.errors import CalibrationError
-from .core.pipeline import View, calibrate
+from .core.inputs import View
+from .core.pipeline import calibrate
 from .core.result import CalibrationResult
 
 __all__ = ["Board", "CalibrationError", "CalibrationResult", "View", "calibrate"]

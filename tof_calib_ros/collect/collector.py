@@ -34,7 +34,7 @@ import numpy as np
 from ..core.board import Board
 from ..core.detection import Detection
 from ..core.errors import CalibrationError
-from ..core.pipeline import View, depth_in_metres, depth_units
+from ..core.inputs import View, depth_in_metres, depth_units
 from ..core.planarize import sample_depth
 from .motion import edge_blur_px, edge_depth_error
 from .tracking import accurate_detect, quick_locate

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core.board import Board
 from ..core.detection import tone_map
-from ..core.pipeline import depth_in_metres, depth_units
+from ..core.inputs import depth_in_metres, depth_units
 
 # Profile across an edge: this far into each square (a fraction of the square), in steps of this many px.
 PROFILE_REACH = 0.45

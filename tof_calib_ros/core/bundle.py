@@ -18,6 +18,7 @@ from scipy.stats import chi2
 
 from . import depth_bias
 from .camera import N_INTRINSICS, depth_of, project, transform_views
+from .result import INTRINSIC_NAMES, Focal
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
 WIGGLE = [N_INTRINSICS + k for k in depth_bias.TERMS["wiggle"]]
@@ -121,6 +122,19 @@ class Fit:
     sigma_depth: np.ndarray
     weights: list[np.ndarray] | None    # per corner, the robust loss's weights
     wiggle_period: float | None = None  # m, the depth model's wiggling period, where it has one
+
+    def std(self) -> dict[str, float]:
+        """Every intrinsic and depth term's standard deviation by name: 0 where it was held fixed."""
+        names = list(INTRINSIC_NAMES) + list(depth_bias.NAMES)
+        std = {n: 0.0 for n in names}
+        for k, i in enumerate(self.free_global):
+            std[names[i]] = float(np.sqrt(max(self.covariance[k, k], 0.0)))
+        return std
+
+    def focal(self) -> Focal:
+        """fx, fy and their standard deviations."""
+        std = self.std()
+        return float(self.state.intrinsics[0]), float(self.state.intrinsics[1]), std["fx"], std["fy"]
 
 
 @dataclass

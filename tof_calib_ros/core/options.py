@@ -34,7 +34,7 @@ class CalibrationOptions:
     ``modulation_hz``: the camera's modulation frequency, which sets the period of its wiggling
     error; given, 'auto' always estimates a wiggling term; not given, 'auto' looks for one over
     the periods ToF cameras have and takes it where the data call for it (see
-    pipeline._select_model). A depth_bias naming 'wiggle' needs it."""
+    model_choice.select_model). A depth_bias naming 'wiggle' needs it."""
 
     method: str = "depth"
     depth_convention: str = "z"

@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from ..core.errors import CalibrationError
-from ..core.pipeline import View, depth_in_metres
+from ..core.inputs import View, depth_in_metres
 
 DISTORTION_MODEL = "plumb_bob"
 # camera_info_manager refuses any other camera name (CameraInfoManager::validateName)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import CalibrationError
-from ..core.pipeline import depth_in_metres
+from ..core.inputs import depth_in_metres
 
 # encoding -> pixel type (one channel each); only what depth and amplitude streams use
 ENCODINGS: dict[str, np.dtype] = {

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from ..collect.replay import FrameError, Skip
-from ..core.pipeline import depth_in_metres
+from ..core.inputs import depth_in_metres
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
 from .image_decode import ImageTooLarge, check_pixels
 

@@ -32,7 +32,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..core.pipeline import View
+from ..core.inputs import View
 from .calibration_file import (
     CalibrationFileError,
     EncodedViews,

@@ -23,7 +23,7 @@ from ..core import depth_bias as bias_model
 from ..core.board import Board
 from ..core.camera import depth_of, pack_intrinsics, transform
 from ..core.errors import CalibrationError
-from ..core.pipeline import View
+from ..core.inputs import View
 from ..core.planarize import planarize
 from ..core.result import MAX_DEPTH_RMS, MAX_FOCAL_REL_STD, MAX_PIXEL_RMS
 from ..files.calibration_file import CalibrationFileError, CameraYaml, read_camera_yaml

@@ -33,7 +33,8 @@ from ..core import depth_bias as bias_model
 from ..core.board import Board
 from ..core.camera import depth_of, pack_intrinsics, project, transform
 from ..core.errors import CalibrationError
-from ..core.pipeline import View, calibrate, depth_in_metres
+from ..core.inputs import View, depth_in_metres
+from ..core.pipeline import calibrate
 from ..core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
 from ..core.result import INTRINSIC_NAMES, CalibrationResult
 from ..files.calibration_file import atomic_write

@@ -1,0 +1,152 @@
+"""The depth and distortion model the data call for, chosen by an information criterion, and the
+joint fit with it (the paper's step 5), re-planarizing until the depths and the fit agree."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from . import bundle
+from . import depth_bias as bias_model
+from .camera import N_INTRINSICS
+from .options import DISTORTION_TERMS, CalibrationOptions, Model
+from .planarize import Plane
+from .view_planes import planarize_all, radial_may_enter, view_observations
+
+MAX_OUTER_ROUNDS = 6
+
+
+def select_model(observations: list[bundle.Observations], state: bundle.State, convention: str,
+                 options: CalibrationOptions, say: Callable[[str], None],
+                 radial: bool = False) -> tuple[bundle.State, list[int], Model]:
+    """The terms the data call for, against the Bayesian information criterion: a term is taken
+    when the likelihood-ratio statistic it brings exceeds ln(n) per parameter, n being the
+    independent measurements. The statistic is the larger of the score test (the first-order drop
+    in the whitened cost, at the noise the smaller fit assumed) and the drop in deviance of the
+    refitted model, each view's noise re-estimated: where a missing term (k1 of a strong lens)
+    inflates the noise the smaller fit assumes, the score test understates it and a trusted
+    focal length came out 3 % off; where a refit lands short (an LM start far off), the score
+    test still sees it. Distortion grows along its presets
+    (k1, k2, then p1 p2, then k3); because the depth fixes each view's pose, it is observable
+    from 4 corners a view. The depth always has its offset; the tilt (a driver's z-depth
+    computed about another centre) is taken when it pays. Where the modulation frequency is
+    given, the wiggle is always estimated: near frontal views cannot tell it from the focal
+    length (its slope over their distances is a depth scale), so a test of it there would
+    pass it over and trust a focal length it has bent; estimated, its uncertainty is the
+    focal length's. Not given, the caller looks for one at the model chosen without it
+    (``look_for_wiggle``) and, where it finds one, chooses again with its period as if given;
+    where it finds a radial offset instead, it chooses again with that a candidate (``radial``).
+    A depth scale is never chosen
+    here: it would make the depth silent on the focal length (the two trade exactly), a ToF
+    camera's scale is set by its modulation frequency, and a scale the data seem to call for
+    is a wrong square size or depth unit, which the verdict reports."""
+    model = Model()
+    base = [0, 1, 2, 3]
+    if options.distortion != "auto":
+        base += DISTORTION_TERMS[options.distortion]
+        model.distortion = options.distortion
+    period = options.wiggle_period
+    if options.depth_bias == "auto":
+        depth_terms, candidates = ["offset"] + (["wiggle"] if period is not None else []), ["tilt"]
+        candidates += ["radial"] if radial else []
+    else:
+        depth_terms, candidates = ([] if options.depth_bias == "none" else options.depth_bias.split("+")), []
+    base += [N_INTRINSICS + k for k in bias_model.parse("+".join(depth_terms) or "none")]
+    fit = bundle.solve(observations, state, convention, base, loss=options.loss, wiggle_period=period)
+    price = np.log(bundle.n_observations(observations))
+
+    fitted: dict[str, bundle.Fit] = {}
+
+    def tested(name: str, terms: list[int]) -> float:
+        """The term's gain less its price, recorded as evidence."""
+        fitted[name] = bundle.solve(observations, fit.state, convention, sorted(free + terms), loss=options.loss,
+                                    wiggle_period=period)
+        gain = max(bundle.score(observations, fit, convention, terms),
+                   bundle.deviance(observations, fit) - bundle.deviance(observations, fitted[name]))
+        model.evidence[name] = {"gain": round(gain, 3), "price": round(len(terms) * price, 3)}
+        return gain - len(terms) * price
+
+    free = list(base)
+    if options.distortion == "auto":
+        while True:
+            # every larger preset, by the terms it adds: k1 alone may not pay where k1 and k2 do
+            larger = list(DISTORTION_TERMS)[list(DISTORTION_TERMS).index(model.distortion) + 1:]
+            extra = {name: [t for t in DISTORTION_TERMS[name] if t not in free] for name in larger}
+            net = {name: tested(name, terms) for name, terms in extra.items()}
+            best = max(net, key=net.get, default=None)
+            if best is None or net[best] <= 0:
+                break
+            free += extra[best]
+            model.distortion = best
+            fit = fitted[best]
+    while candidates:
+        net = {c: tested(c, [N_INTRINSICS + k for k in bias_model.TERMS[c]]) for c in candidates}
+        best = max(net, key=net.get)
+        if net[best] <= 0:
+            break
+        candidates.remove(best)
+        depth_terms.append(best)
+        free += [N_INTRINSICS + k for k in bias_model.TERMS[best]]
+        fit = fitted[best]
+    model.depth_bias = "+".join(depth_terms) or "none"
+    if options.distortion == "auto" or options.depth_bias == "auto":
+        model.reasons.append(f"chosen by the data: distortion {model.distortion}, depth terms {model.depth_bias} ("
+                             + ", ".join(f"{k} {v['gain']:.1f} vs {v['price']:.1f}" for k, v in model.evidence.items())
+                             + ": the cost each term would remove against its price)"
+                             + (f"; the wiggle always, of period {period:.3f} m" if period is not None
+                                and options.depth_bias == "auto" else ""))
+        say(model.reasons[-1])
+    return fit.state, sorted(free), model
+
+
+def joint(prepared, plane_samples, obj, observations, state, free, options: CalibrationOptions, say):
+    """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
+    hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
+    noiseless data exact). Returns the fit, the corner depths, the planes and the observations
+    they make (at the depth's inflation the given ones have)."""
+    inflation = observations[0].depth_inflation
+    convention = options.depth_convention
+    for round_ in range(MAX_OUTER_ROUNDS):
+        before = state.globals_
+        fit = bundle.solve(observations, state, convention, free, loss=options.loss,
+                           wiggle_period=options.wiggle_period)
+        state = fit.state
+        say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
+            f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
+        depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, state.intrinsics,
+                                                                 state.bias, convention, options.wiggle_period,
+                                                                 radial_may_enter(options))
+        observations = view_observations(obj, prepared, depths, floors, wiggles, radials, inflation)
+        change = np.abs(state.globals_ - before)[fit.free_global]
+        std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
+        # the first round starts where the model's choice left it, on the same observations: only
+        # from the second does a small move say the observations have stopped changing
+        if round_ and np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
+            break
+    return fit, depths, planes, observations
+
+
+class Fitted(NamedTuple):
+    """A joint fit with the model it was fitted with, and the views as it planarized them."""
+    fit: bundle.Fit
+    free: list[int]
+    model: Model
+    depths: list[np.ndarray]
+    planes: list[Plane | None]
+    observations: list[bundle.Observations]
+
+
+def choose_and_fit(prepared, plane_samples, obj, observations, state, scale: bool, options: CalibrationOptions, say,
+                   model: Model | None = None, free: list[int] | None = None, radial: bool = False) -> Fitted:
+    """The model the data call for (unless ``model`` and its ``free`` parameters are given; a radial
+    offset among the candidates where ``radial``) and the joint fit with it, with a depth scale
+    term where ``scale``. Returns the fit, its free parameters, the model, and what ``joint``
+    returns beside the fit."""
+    if model is None or free is None:
+        state, free, model = select_model(observations, state, options.depth_convention, options, say, radial)
+    if scale:
+        free = sorted({*free, N_INTRINSICS + 1})
+        model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
+    fit, depths, planes, observations = joint(prepared, plane_samples, obj, observations, state, free, options, say)
+    return Fitted(fit, free, model, depths, planes, observations)
