@@ -82,13 +82,13 @@ def _check_not_parallel(planes: list[Plane], corner_poses: np.ndarray | None) ->
                            f"(within {spread:.2f} deg): tilt the board differently between views")
 
 
-def _k_update(views, samples, board, intr, bias, convention, estimate_offset, max_iter=10):
+def _k_update(views: list[Prepared], samples: PlaneSamples, obj: list[np.ndarray], intr: np.ndarray, bias: np.ndarray,
+              convention: str, estimate_offset: bool, max_iter: int = 10) -> tuple[np.ndarray, np.ndarray, float]:
     """The paper's lines 4-9: update K, re-planarize, until K settles."""
     err = np.inf
     for _ in range(max_iter):
         depths = planarize_all(views, samples, intr, bias, convention).depths
-        new, offset, err = update_intrinsics(intr, [v.corners for v in views], depths,
-                                             [board.object_points(v.ids) for v in views], convention,
+        new, offset, err = update_intrinsics(intr, [v.corners for v in views], depths, obj, convention,
                                              estimate_offset)
         settled = abs(new[0] - intr[0]) < 1e-7 * intr[0] and abs(offset - bias[0]) < 1e-7
         intr, bias = new, np.r_[offset, bias[1:]]
@@ -215,6 +215,98 @@ def _without(view: View, board: Board, drop: list[int]) -> tuple[np.ndarray | No
     return np.asarray(corners)[keep], ids[keep]
 
 
+def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, corner_poses: np.ndarray | None,
+                   width: int, options: CalibrationOptions, notes: list[str], say: Callable[[str], None]
+                   ) -> tuple[PlaneSamples, str, str]:
+    """Each view's plane samples, chosen once (valid depth, RANSAC inliers) on the squares the
+    planes use, those squares and why (``intr``, ``corner_poses``: OpenCV's calibration, or the
+    intrinsics the depth guesses and no poses where it refused). A view whose depth is unusable
+    still counts with its corners, and the notes say so."""
+    convention = options.depth_convention
+    sampled = "all" if options.plane_squares == "auto" else options.plane_squares
+    samples: list[DepthSamples | None] = []
+    white_inliers: list[np.ndarray | None] = []
+    first_planes, black_offsets = [], []
+    for v in prepared:
+        try:
+            smp = board_samples(v.depth, v.corners, v.ids, board, intr, v.amplitude, squares=sampled)
+            plane = fit_samples(smp.subset(~smp.black), intr, convention, ransac=True)
+            offset = black_offset(smp, plane, intr, convention)
+            if offset is not None:
+                black_offsets.append(offset)
+            samples.append(smp)
+            white_inliers.append(plane.inliers)
+            first_planes.append(plane)
+        except CalibrationError as exc:
+            samples.append(None)
+            white_inliers.append(None)
+            notes.append(f"view {v.index}: {exc}; used for its corners only")
+            say(notes[-1])
+    if not first_planes:
+        raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
+                               "method='traditional' calibrates from the corners alone")
+    _check_not_parallel(first_planes, corner_poses)
+    squares = options.plane_squares
+    squares_reason = ""
+    if squares == "auto":
+        apart, squares_reason = black_reads_apart(black_offsets)
+        squares = "white" if apart else "all"
+        say(squares_reason)
+    # The RANSAC inliers of the chosen squares are the view's samples from here on (the white
+    # squares' were found above).
+    for k, smp in enumerate(samples):
+        if smp is not None:
+            if squares == "all":
+                samples[k] = smp.subset(fit_samples(smp, intr, convention, ransac=True).inliers)
+            else:
+                samples[k] = smp.subset(~smp.black).subset(white_inliers[k])
+    return PlaneSamples(samples, width), squares, squares_reason
+
+
+def _sized_intrinsics(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray],
+                      guesses: list[np.ndarray], options: CalibrationOptions, say: Callable[[str], None]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """K (and the depth offset) from the squares' true size, started from whichever guess
+    (OpenCV's or the depth's) sizes the squares better; distortion starts at none (OpenCV's, from
+    few corners, can be wild) unless it was asked for."""
+    convention = options.depth_convention
+    estimate_offset = options.depth_bias == "auto" or 0 in bias_model.parse(options.depth_bias)
+    kept = [0, 1, 2, 3] + DISTORTION_TERMS.get(options.distortion, [])
+    guesses = [np.where(np.isin(np.arange(N_INTRINSICS), kept), g, 0.0) for g in guesses]
+    corners = [v.corners for v in prepared]
+    try:
+        start = min(guesses, key=lambda g: update_intrinsics(
+            g, corners, planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS), convention)[0], obj,
+            convention, estimate_offset)[2])
+        intr, bias, err = _k_update(prepared, plane_samples, obj, start.copy(), np.zeros(bias_model.N_BIAS),
+                                    convention, estimate_offset)
+    except CalibrationError as exc:   # the planes fail once K has run off
+        raise CalibrationError(f"sizing the squares from the depth diverged ({exc}): the corners and the depth "
+                               "disagree (corners out of order or of other frames, or another board?)") from exc
+    say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
+    return intr, bias
+
+
+def _first_fit(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray], intr: np.ndarray,
+               bias: np.ndarray, options: CalibrationOptions) -> tuple[list[bundle.Observations], bundle.State]:
+    """The views' observations at K from the squares' size, and the state the model's choice
+    starts from: each view posed from its 3D corners (from its corners alone where its depth is
+    unusable), then refined with K and the bias held."""
+    convention = options.depth_convention
+    depths, floors, _, wiggles, radials = planarize_all(prepared, plane_samples, intr, bias, convention,
+                                                        options.wiggle_period, radial_may_enter(options))
+    poses = []
+    for o, v, d in zip(obj, prepared, depths):
+        if np.isfinite(d).all():
+            u = directions(v.corners, intr, convention)
+            poses.append(pose_from_points(o, u * bias_model.true_depth(bias, d, u)[:, None]))
+        else:
+            poses.append(pose_from_pixels(o, v.corners, intr))
+    observations = view_observations(obj, prepared, depths, floors, wiggles, radials)
+    return observations, bundle.solve(observations, bundle.State(intr, bias, np.array(poses)), convention, [],
+                                      rounds=1).state
+
+
 def _calibrate(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
     convention = options.depth_convention
@@ -224,7 +316,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     obj = [board.object_points(v.ids) for v in prepared]
     notes: list[str] = []
     trad: Traditional | None = None
-    # the baseline fits the lens model asked for; the depth method starts from ROS's default
+    # 1. traditional calibration: the baseline fits the lens model asked for; the depth method
+    # starts from ROS's default
     lens = options.distortion if options.method == "traditional" and options.distortion != "auto" else "plumb_bob"
     try:
         trad = calibrate_opencv(obj, [v.corners for v in prepared], image_size, lens)
@@ -241,81 +334,20 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         model = Model(distortion=lens, depth_bias="none", plane_squares="white")
         return _result(options, model, board, image_size, corner_fit, prepared, None, rejected, notes)
 
-    # Choose each view's plane samples once (valid depth, RANSAC inliers); a view whose depth is
-    # unusable still counts with its corners, and the notes say so.
+    # 2. the depth planarized at the corners; 3. K from the squares' size; 4. the poses from the 3D corners
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
-    first = trad.intrinsics if trad is not None else guess
-    sampled = "all" if options.plane_squares == "auto" else options.plane_squares
-    samples: list[DepthSamples | None] = []
-    white_inliers: list[np.ndarray | None] = []
-    first_planes, black_offsets = [], []
-    for v in prepared:
-        try:
-            smp = board_samples(v.depth, v.corners, v.ids, board, first, v.amplitude, squares=sampled)
-            plane = fit_samples(smp.subset(~smp.black), first, convention, ransac=True)
-            offset = black_offset(smp, plane, first, convention)
-            if offset is not None:
-                black_offsets.append(offset)
-            samples.append(smp)
-            white_inliers.append(plane.inliers)
-            first_planes.append(plane)
-        except CalibrationError as exc:
-            samples.append(None)
-            white_inliers.append(None)
-            notes.append(f"view {v.index}: {exc}; used for its corners only")
-            say(notes[-1])
-    if not first_planes:
-        raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
-                               "method='traditional' calibrates from the corners alone")
-    _check_not_parallel(first_planes, None if trad is None else trad.poses)
-    squares = options.plane_squares
-    squares_reason = ""
-    if squares == "auto":
-        apart, squares_reason = black_reads_apart(black_offsets)
-        squares = "white" if apart else "all"
-        say(squares_reason)
-    # The RANSAC inliers of the chosen squares are the view's samples from here on (the white
-    # squares' were found above).
-    for k, smp in enumerate(samples):
-        if smp is not None:
-            if squares == "all":
-                samples[k] = smp.subset(fit_samples(smp, first, convention, ransac=True).inliers)
-            else:
-                samples[k] = smp.subset(~smp.black).subset(white_inliers[k])
-    plane_samples = PlaneSamples(samples, image_size[0])
-    # Start the K update from whichever guess (OpenCV's or the depth's) sizes the squares better;
-    # distortion starts at none (OpenCV's, from few corners, can be wild) unless it was asked for.
-    estimate_offset = options.depth_bias == "auto" or 0 in bias_model.parse(options.depth_bias)
-    obj_pts = [board.object_points(v.ids) for v in prepared]
-    guesses = [guess] if trad is None else [trad.intrinsics, guess]
-    kept = [0, 1, 2, 3] + DISTORTION_TERMS.get(options.distortion, [])
-    guesses = [np.where(np.isin(np.arange(N_INTRINSICS), kept), g, 0.0) for g in guesses]
-    try:
-        start = min(guesses, key=lambda g: update_intrinsics(
-            g, [v.corners for v in prepared], planarize_all(prepared, plane_samples, g, np.zeros(bias_model.N_BIAS),
-                                                            convention)[0], obj_pts, convention, estimate_offset)[2])
-        intr, bias, err = _k_update(prepared, plane_samples, board, start.copy(), np.zeros(bias_model.N_BIAS),
-                                    convention, estimate_offset)
-    except CalibrationError as exc:   # the planes fail once K has run off
-        raise CalibrationError(f"sizing the squares from the depth diverged ({exc}): the corners and the depth "
-                               "disagree (corners out of order or of other frames, or another board?)") from exc
-    say(f"K from square sizes: fx={intr[0]:.2f} fy={intr[1]:.2f} (square size RMS error {err * 100:.2f} %)")
-
-    depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, intr, bias, convention,
-                                                             options.wiggle_period, radial_may_enter(options))
-    poses = []
-    for o, v, d in zip(obj, prepared, depths):
-        if np.isfinite(d).all():
-            u = directions(v.corners, intr, convention)
-            poses.append(pose_from_points(o, u * bias_model.true_depth(bias, d, u)[:, None]))
-        else:
-            poses.append(pose_from_pixels(o, v.corners, intr))
-    state = bundle.State(intr, bias, np.array(poses))
-    # The denoised depths depend on K and the bias through the rays: re-planarize and re-fit
-    # until they agree (the paper re-planarizes once; a few rounds make noiseless data exact).
-    observations = view_observations(obj, prepared, depths, floors, wiggles, radials)
-    start = bundle.solve(observations, state, convention, [], rounds=1).state
+    if trad is None:
+        plane_samples, squares, squares_reason = _plane_samples(prepared, board, guess, None, image_size[0], options,
+                                                                notes, say)
+    else:
+        plane_samples, squares, squares_reason = _plane_samples(prepared, board, trad.intrinsics, trad.poses,
+                                                                image_size[0], options, notes, say)
+    intr, bias = _sized_intrinsics(prepared, plane_samples, obj, [guess] if trad is None else [trad.intrinsics, guess],
+                                   options, say)
+    observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
+    # 5. the joint fit in the model the data call for, the depth's weight falling where it leaves
+    # the result worse than the corners alone
     fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
     asked, found_wiggle = options, None
     if options.depth_bias == "auto" and options.modulation_hz is None:
