@@ -162,14 +162,15 @@ def test_a_board_that_never_stops_calibrates_at_any_frame_rate(tmp_path, capsys,
 
 @pytest.fixture(scope="module")
 def kinect_low_res(kinect_dir, tmp_path_factory) -> Path:
-    """The Kinect v2 folder at 0.4 scale (205x170): what a PMD or pico flexx class sensor gives."""
+    """The Kinect v2 folder at 0.4 scale (205x170): what a PMD or pico flexx class sensor gives
+    (the depth's nearest pixel to each pixel's centre, where the IR's average is)."""
     folder = tmp_path_factory.mktemp("kinect_205x170")
     for ir_path in sorted(kinect_dir.glob("*_ir.png")):
         ir = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
         depth = cv2.imread(str(ir_path.with_name(ir_path.name.replace("_ir", "_depth"))), cv2.IMREAD_UNCHANGED)
         cv2.imwrite(str(folder / ir_path.name), cv2.resize(ir, (205, 170), interpolation=cv2.INTER_AREA))
         cv2.imwrite(str(folder / ir_path.name.replace("_ir", "_depth")),
-                    cv2.resize(depth, (205, 170), interpolation=cv2.INTER_NEAREST))
+                    cv2.resize(depth, (205, 170), interpolation=cv2.INTER_NEAREST_EXACT))
     return folder
 
 
