@@ -186,6 +186,12 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
     # the CLI finds what the calibration's detector finds (47 of 51), and uses nearly all of it
     assert doc["collection"]["frames_with_board"] >= max(found, 45), out
     assert len(doc["views"]) >= 0.9 * doc["collection"]["frames_with_board"], out
+    # one worker finds the same corners as several: a worker's detections do not depend on those it
+    # made before (the SB detector's random generator is seeded for each)
+    code, _, err = run(capsys, "images", kinect_low_res, *BOARD, "--output", tmp_path / "one", "--workers", "1")
+    assert code == EXIT_OK, err
+    one = json.loads((tmp_path / "one" / "calibration.json").read_text())
+    assert one["views"] == doc["views"] and one["camera_matrix"] == doc["camera_matrix"]
     # against the full-resolution calibration of the same views, scaled (pixel centres stay at integers)
     code, _, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "full")
     assert code == EXIT_OK, err
