@@ -337,12 +337,9 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # 2. the depth planarized at the corners; 3. K from the squares' size; 4. the poses from the 3D corners
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
-    if trad is None:
-        plane_samples, squares, squares_reason = _plane_samples(prepared, board, guess, None, image_size[0], options,
-                                                                notes, say)
-    else:
-        plane_samples, squares, squares_reason = _plane_samples(prepared, board, trad.intrinsics, trad.poses,
-                                                                image_size[0], options, notes, say)
+    first, corner_poses = (guess, None) if trad is None else (trad.intrinsics, trad.poses)
+    plane_samples, squares, squares_reason = _plane_samples(prepared, board, first, corner_poses, image_size[0],
+                                                            options, notes, say)
     intr, bias = _sized_intrinsics(prepared, plane_samples, obj, [guess] if trad is None else [trad.intrinsics, guess],
                                    options, say)
     observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
@@ -419,9 +416,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         fit = over_wiggles(observations, fit, free, options, found_wiggle)
         if corner_fit is not None:
             fit = within_corners(alone, fit, corner_fit)
-        if fit.std()["fx"] > 1.1 * alone.std()["fx"]:
+        averaged, own = fit.std()["fx"], alone.std()["fx"]
+        if averaged > 1.1 * own:
             model.reasons.append(
-                f"fx's uncertainty is {fit.std()['fx']:.2f} px, not the {alone.std()['fx']:.2f} of the model chosen "
+                f"fx's uncertainty is {averaged:.2f} px, not the {own:.2f} of the model chosen "
                 "alone: it includes the fits of the depth models the data leave likely (without a wiggle, and with "
                 "one at each period looked for), each as likely as the data make it, up to what the corners alone "
                 "leave of it")

@@ -654,9 +654,9 @@ def _same_lens(depth: CalibrationResult, same: CalibrationResult | str | None) -
     """The principal point beside OpenCV's with the depth-aided result's lens terms: it trades with
     them (on the Kinect v2 views k3 alone moves OpenCV's by 1.4 px), so part of a difference from
     the k3-fixed baseline is the lens model's, not the depth's."""
-    lens = _e(depth.model.distortion)
     if same is None:
         return ""
+    lens = _e(depth.model.distortion)
     if isinstance(same, str):
         return f'<p class="note">OpenCV fitting the same lens terms ({lens}) failed: {_e(same)}</p>'
     apart = depth.K[:2, 2] - same.K[:2, 2]
