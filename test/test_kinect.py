@@ -165,16 +165,34 @@ def test_the_principal_point_is_within_3_px_of_opencvs_with_the_lens_model_ours_
     assert np.all(np.abs(apart) < 3) and np.all(np.abs(apart) < 3 * sigma), (apart, sigma)
 
 
-@pytest.mark.parametrize("which", [slice(None), slice(0, None, 2), slice(1, None, 2)], ids=["all", "even", "odd"])
-def test_at_205x170_a_trusted_focal_length_holds_the_full_resolution_one_within_2_sigmas(low_views, reference,
-                                                                                         which):
+@pytest.fixture(scope="module")
+def low(low_views):
+    """All the 205x170 views, the even ones and the odd ones, on the defaults."""
+    return {name: calibrate(low_views[which], BOARD)
+            for name, which in (("all", slice(None)), ("even", slice(0, None, 2)), ("odd", slice(1, None, 2)))}
+
+
+@pytest.mark.parametrize("which", ["all", "even", "odd"])
+def test_at_205x170_the_focal_length_is_trusted_within_2_sigmas_of_the_full_resolution_one(low, reference, which):
     """Downsampled by 0.4 (a PMD-class 205x170, as ``kinect_real.py`` does it), the views bow
-    alike (-61 +- 13 mm over all of them) and their depth reads 1.4 % short of the corners, too
-    little for the depth check to take a scale there: fx rests on the depth's scale, 1.7 % below
-    the full-resolution reference. Its uncertainty, widened for the scale left out, was the
-    data's doubt of the scale alone (145.44 +- 0.33, trusted 8 sigmas off); it now reaches as far
-    as the data put the scale (+- 1.39: refused, fy being as poorly constrained)."""
-    res = calibrate(low_views[which], BOARD)
+    alike and their depth reads 1.4 % short of the corners, too little for the depth check to
+    take a scale: at its full weight the depth put fx 1.7 % below the full-resolution reference,
+    and what its model leaves open (the scale) made fx 145.6 +- 2.7 px, refused, where the
+    corners alone said 148.3 +- 1.2 (their spread over folds of the views). The depth now yields
+    until the uncertainty stated is no larger than the corners' (at 16 times its noise): all
+    three are trusted, measured 147.73 +- 0.85, 148.01 +- 0.86 and 147.70 +- 0.63 (all, even,
+    odd; the reference, scaled, 148.04)."""
+    res = low[which]
     truth = np.diag(reference.K)[:2] * LOW_SCALE   # the principal point aside, focal lengths scale plainly
     z = (np.diag(res.K)[:2] - truth) / np.array([res.std["fx"], res.std["fy"]])
-    assert not res.ok or np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z)
+    assert res.ok and np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z, res.model.reasons)
+
+
+def test_at_205x170_the_halves_agree_closer_than_opencvs(low, low_views):
+    """The odd and the even views at 205x170: measured 0.21 % apart in fx and 0.43 % in fy (2.3
+    and 2.2 % before the depth yielded to what its model leaves open); OpenCV's halves are 0.88
+    and 0.72 % apart. The issue's 0.3 % is met in fx, not in fy."""
+    apart = np.abs(np.diag(low["odd"].K)[:2] / np.diag(low["even"].K)[:2] - 1)
+    trad = [calibrate(low_views[which], BOARD, method="traditional") for which in (slice(0, None, 2), slice(1, None, 2))]
+    trad_apart = np.abs(np.diag(trad[1].K)[:2] / np.diag(trad[0].K)[:2] - 1)
+    assert np.all(apart < 0.005) and np.all(apart < trad_apart), (apart, trad_apart)

@@ -139,6 +139,34 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
 
 
+
+def test_the_depth_yields_where_what_its_model_leaves_open_makes_fx_less_certain_than_the_corners(monkeypatch):
+    """The yield is judged on the uncertainty the result states, which adds what the depth's model
+    leaves open (a scale the corners fix, the wiggles the data leave likely) to the fit's own:
+    real Kinect v2 views at 205x170 stated 145.6 +- 2.7 px with the depth at its full weight, the
+    corners alone 148.3 +- 1.2. Here that widening is made ten times fx's own uncertainty at the
+    depth's full weight only: the depth must yield once, and say why."""
+    from dataclasses import replace
+
+    from tof_calib_ros.core import pipeline
+    original = pipeline._widened
+
+    def wide_at_full_weight(observations, fit, *rest):
+        stated, why = original(observations, fit, *rest)
+        if observations[0].depth_inflation == 1.0:
+            stated = replace(stated, covariance=100 * stated.covariance)
+        return stated, why
+
+    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=3, noise=sim.Noise(depth=0.01))
+    plain = calibrate(views, BOARD)
+    assert plain.model.depth_inflation == 1.0, plain.model.reasons
+    monkeypatch.setattr(pipeline, "_widened", wide_at_full_weight)
+    res = calibrate(views, BOARD)
+    assert res.model.depth_inflation == pipeline.DEPTH_INFLATION_STEP, res.model.reasons
+    assert any("with what its model leaves open, left f" in r and "less certain than the corners alone" in r
+               for r in res.model.reasons), res.model.reasons
+    assert abs(res.K[0, 0] - F) < 2 * res.std["fx"], (res.K[0, 0], res.std["fx"])
+
 @pytest.mark.slow
 def test_a_wiggling_depth_yields_to_the_corners():
     """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):

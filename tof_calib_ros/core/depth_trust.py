@@ -193,14 +193,14 @@ def why_yield(observations: list[bundle.Observations], fit: bundle.Fit, free: li
         return (f"the corners fit worse with the depth at its full weight than alone ({noise[0]:.3f} against "
                 f"{corners.noise[0]:.3f} px a degree of freedom"), None
     estimates = bundle.fold_estimates(observations, fit, options.depth_convention, CORNER_FOLDS, free, options.loss)
-    worse = _less_certain(fit, estimates, free, corners)
+    worse = less_certain(fit, estimates, free, corners)
     return (None if worse is None else
             f"the depth at its full weight left {worse[0]} less certain than the corners alone ({worse[1]:.2f} "
             f"against {worse[2]:.2f} px, over folds of the views"), estimates
 
 
-def _less_certain(fit: bundle.Fit, estimates: np.ndarray | None, free: list[int],
-                  corners: CornersAlone) -> tuple[str, float, float] | None:
+def less_certain(fit: bundle.Fit, estimates: np.ndarray | None, free: list[int],
+                 corners: CornersAlone) -> tuple[str, float, float] | None:
     """The focal length (fx or fy) the depth leaves less certain than the corners alone, with both
     standard deviations, each raised to its spread over folds of the views (``estimates``, the
     fit's; OpenCV on the same folds for the corners), or None."""
