@@ -144,6 +144,7 @@ def bowl_check(samples: PlaneSamples, fit: bundle.Fit, convention: str) -> tuple
 class DepthCheck:
     scale: bool = False                   # the corners call for a depth scale term
     level: float = 0.0   # how far off the corners' distances the depth reads (relative)
+    over_distance: bool = False   # that ratio varies with the distance beyond its noise
     reasons: list[str] = field(default_factory=list)
 
 
@@ -270,6 +271,7 @@ def depth_check(fit: bundle.Fit, depths: list[np.ndarray], planes: list[Plane | 
     if structure is not None:   # reported, not corrected: on a real Kinect the corners were the worse
         tau, f_stat = structure
         s = np.hypot(s, tau)
+        check.over_distance = True
         check.reasons.append(
             f"the ratio of the views' distances from the depth and from the corners varies with the distance "
             f"({tau:.2%} RMS, F = {f_stat:.0f}): a depth error over distance the model does not explain (ToF "
