@@ -139,7 +139,6 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
 
 
-
 def test_the_depth_yields_where_what_its_model_leaves_open_makes_fx_less_certain_than_the_corners(monkeypatch):
     """Where the depth's error follows the distance in a way the model does not explain, the yield
     is judged on the uncertainty the result states, which adds what the depth's model leaves open
