@@ -92,3 +92,66 @@ def test_a_depth_scale_left_out_is_carried_as_far_as_the_data_put_it(seed):
             assert abs(moved) > 0.5 * scale * truth[0] and abs(moved) > 10 * fit.covariance[0, 0] ** 0.5
             assert abs(freed.state.intrinsics[0] - truth[0]) < 3 * freed.covariance[0, 0] ** 0.5   # about the truth
     assert std[0.0] < 0.4 * std[0.03]
+
+
+def _quiet_and_noisy(rng, poses, obj, truth, magnify=1.0):
+    """Corners only: every third view quiet (0.02 px), the rest noisy (0.1 px); the quiet ones'
+    pattern ``magnify``-d about the principal point, as a detector's error on the nearest boards
+    (which their scatter does not show) would be."""
+    views = []
+    for j, pose in enumerate(poses):
+        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
+        quiet = j % 3 == 0
+        px = project(X, truth).pixels + rng.normal(0, 0.02 if quiet else 0.1, (len(obj), 2))
+        if quiet:
+            px = truth[2:4] + (px - truth[2:4]) * magnify
+        views.append(bundle.Observations(obj, px, np.full(len(obj), np.nan)))
+    return views
+
+
+def _poses(rng, n):
+    return np.array([[*rng.normal(0, 0.35, 3), -0.12, -0.1, z] for z in np.linspace(0.7, 1.4, n)])
+
+
+def test_the_move_between_pixel_weightings_has_the_spread_the_sandwich_gives():
+    """Weighted alike, views whose noise differs tenfold give a camera that moves from the one
+    each view's own noise weights; over 60 draws of the noise the move's spread is what the
+    sandwich (the alike fit's covariance under each view's own noise) less the own fit's
+    covariance says (Hausman's), within the draws' own error."""
+    rng = np.random.default_rng(4)
+    obj = Board(6, 5, 0.05).object_points()
+    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    poses = _poses(rng, 12)
+    moves, predicted = [], []
+    for _ in range(60):
+        views = _quiet_and_noisy(rng, poses, obj, truth)
+        start = bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy())
+        own = bundle.solve(views, start, "z", [0, 1, 2, 3])
+        alike = bundle.solve(views, own.state, "z", [0, 1, 2, 3], pooled_pixels=True)
+        moves.append(alike.state.intrinsics[:4] - own.state.intrinsics[:4])
+        predicted.append(np.diag(bundle._pooled_sandwich(views, own, alike, "z")) - np.diag(own.covariance))
+    ratio = np.std(moves, axis=0) / np.sqrt(np.mean(predicted, axis=0))
+    assert np.all((ratio > 0.75) & (ratio < 1.3)), ratio
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_what_the_pixel_weights_choose_is_stated(seed):
+    """The quiet views' pattern 2 % magnified: weighted by its own noise the fit follows them,
+    fx 4.2-5.6 px off at 7-17 of its sigmas; weighted alike it moves, beyond what the views'
+    noise explains, and the stated uncertainty takes the move in (the truth then 1.6-2.4 of its
+    sigmas away: weighted alike the fit is off too, by the quiet views' share). Without that
+    error the move is the noise's, and nothing is added."""
+    rng = np.random.default_rng(seed)
+    obj = Board(6, 5, 0.05).object_points()
+    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    poses = _poses(rng, 18)
+    for magnify in (1.02, 1.0):
+        views = _quiet_and_noisy(rng, poses, obj, truth, magnify)
+        fit = bundle.solve(views, bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy()), "z",
+                           [0, 1, 2, 3])
+        stated, _ = bundle.reweighted(views, fit, fit, "z")
+        off, own, said = fit.state.intrinsics[0] - truth[0], fit.covariance[0, 0] ** 0.5, stated.covariance[0, 0] ** 0.5
+        if magnify > 1:
+            assert abs(off) > 5 * own and abs(off) < 3 * said, (off, own, said)
+        else:
+            assert said == own and abs(off) < 3 * own, (off, own, said)
