@@ -181,23 +181,32 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
     found = sum(detect(cv2.imread(str(p), cv2.IMREAD_UNCHANGED), Board(5, 7, 0.03)).corners is not None
                 for p in sorted(kinect_low_res.glob("*_ir.png")))
     code, out, err = run(capsys, "images", kinect_low_res, *BOARD, "--output", tmp_path)
-    assert code == EXIT_OK, err + out
-    doc = json.loads((tmp_path / "calibration.json").read_text())
+    # trusted, or refused as poorly constrained only: the folder's 48 views (a partial board left
+    # out) gave fx 150.22 +- 0.72, trusted, 1.5 % and 2.4 of those sigmas above the same views at
+    # full resolution, scaled; their pixels weighted alike move fx 1.55 px, which their noise
+    # does not explain, and the uncertainty now says so (+- 1.69: refused, 2026-11-28)
+    assert code in (EXIT_OK, EXIT_QUALITY), err + out
+    doc = json.loads((tmp_path / ("calibration.json" if code == EXIT_OK else "rejected/calibration.json")).read_text())
+    assert code == EXIT_OK or all("poorly constrained" in r for r in doc["verdict"]["reasons"]), doc["verdict"]
     # the CLI finds what the calibration's detector finds (47 of 51), and uses nearly all of it
     assert doc["collection"]["frames_with_board"] >= max(found, 45), out
     assert len(doc["views"]) >= 0.9 * doc["collection"]["frames_with_board"], out
     # one worker finds the same corners as several: a worker's detections do not depend on those it
     # made before (the SB detector's random generator is seeded for each)
-    code, _, err = run(capsys, "images", kinect_low_res, *BOARD, "--output", tmp_path / "one", "--workers", "1")
-    assert code == EXIT_OK, err
-    one = json.loads((tmp_path / "one" / "calibration.json").read_text())
+    one_code, _, err = run(capsys, "images", kinect_low_res, *BOARD, "--output", tmp_path / "one", "--workers", "1")
+    assert one_code == code, err
+    one = json.loads((tmp_path / "one" / ("calibration.json" if code == EXIT_OK else "rejected/calibration.json")
+                      ).read_text())
     assert one["views"] == doc["views"] and one["camera_matrix"] == doc["camera_matrix"]
     # against the full-resolution calibration of the same views, scaled (pixel centres stay at integers)
     code, _, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "full")
     assert code == EXIT_OK, err
-    full = np.array(json.loads((tmp_path / "full" / "calibration.json").read_text())["camera_matrix"])
+    full_doc = json.loads((tmp_path / "full" / "calibration.json").read_text())
+    full, full_std = np.array(full_doc["camera_matrix"]), full_doc["std"]
     K, s = np.array(doc["camera_matrix"]), 205 / 512
     assert K[0, 0] == pytest.approx(full[0, 0] * s, rel=0.02) and K[1, 1] == pytest.approx(full[1, 1] * s, rel=0.02)
+    if doc["verdict"]["ok"]:   # trusted: within 2 sigmas (both calibrations') of the full-resolution fx, scaled
+        assert abs(K[0, 0] - full[0, 0] * s) < 2 * np.hypot(doc["std"]["fx"], full_std["fx"] * s), (K, doc["std"])
     # the principal point within 3 px (1.5 % of the width), or 3 of the two calibrations' combined
     # stated sigmas (known: the data-chosen model, full distortion and a depth tilt that trades
     # with the principal point, puts cx 2.8 px, about 6 stated sigmas, from the full-resolution one)
@@ -208,7 +217,7 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
     # open (83.30 before); the folder's 48 views (a partial board left out) take a depth scale and
     # the yield does not move them: the issue's principal-point target (issue 12), reported as an
     # expected failure where it is missed, after the checks above
-    std, full_std = doc["std"], json.loads((tmp_path / "full" / "calibration.json").read_text())["std"]
+    std = doc["std"]
     for k, name in enumerate(("cx", "cy")):
         tol = max(3.0, 3 * np.hypot(std[name], full_std[name] * s))
         off = abs(K[k, 2] - ((full[k, 2] + 0.5) * s - 0.5))

@@ -173,19 +173,23 @@ def low(low_views):
 
 
 @pytest.mark.parametrize("which", ["all", "even", "odd"])
-def test_at_205x170_the_focal_length_is_trusted_within_2_sigmas_of_the_full_resolution_one(low, reference, which):
+def test_at_205x170_the_focal_length_is_within_2_sigmas_of_the_full_resolution_one(low, reference, which):
     """Downsampled by 0.4 (a PMD-class 205x170, as ``kinect_real.py`` does it), the views bow
     alike and their depth reads 1.4 % short of the corners, too little for the depth check to
     take a scale: at its full weight the depth put fx 1.7 % below the full-resolution reference,
     and what its model leaves open (the scale) made fx 145.6 +- 2.7 px, refused, where the
     corners alone said 148.3 +- 1.2 (their spread over folds of the views). The depth now yields
     until the uncertainty stated is no larger than the corners' (at 16 times its noise): all
-    three are trusted, measured 147.73 +- 0.85, 148.01 +- 0.86 and 147.70 +- 0.63 (all, even,
-    odd; the reference, scaled, 148.04)."""
+    three were trusted, measured 147.73 +- 0.85, 148.01 +- 0.86 and 147.70 +- 0.63 (all, even,
+    odd; the reference, scaled, 148.04). The even half's pixels weighted alike move fx 1.47 px,
+    which their noise does not explain: its uncertainty includes the move, +- 1.65, and it is
+    refused as poorly constrained (2026-11-28). All the views are trusted; a half, trusted or
+    refused for its uncertainty alone."""
     res = low[which]
     truth = np.diag(reference.K)[:2] * LOW_SCALE   # the principal point aside, focal lengths scale plainly
     z = (np.diag(res.K)[:2] - truth) / np.array([res.std["fx"], res.std["fy"]])
-    assert res.ok and np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z, res.model.reasons)
+    assert np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z, res.model.reasons)
+    assert res.ok or (which != "all" and all("poorly constrained" in r for r in res.verdict)), res.verdict
 
 
 def test_at_205x170_the_halves_agree_closer_than_opencvs(low, low_views):

@@ -469,3 +469,26 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     problem = bundle.Problem(obs, "z", np.full(5, 0.01), np.full(5, 1e-3), [0, 1, 2, 3], True, None, period)
     _, ddep, _, _ = problem.raw(truth)
     assert np.max(np.abs(ddep)) < 2e-5, np.max(np.abs(ddep))
+
+
+
+def test_the_principal_point_counts_what_the_pixel_weights_choose():
+    """Twenty views, every fourth quiet (0.01 px, against 0.1) and its corners 1 px to the right,
+    as a detector's error on the nearest boards would put them (their scatter does not show it):
+    weighted each by its own noise, cx follows the quiet views, 0.82 px off, stated +- 0.09 (4.5
+    sigmas). Weighted alike the views' pixels move it beyond what their noise explains, the
+    uncertainty includes the move (+- 0.55), and the result says so; without that error nothing
+    is added."""
+    stated = {}
+    for moved in (0.0, 1.0):
+        views = _views([F, F, 99.5, 99.5, 0, 0, 0, 0, 0], 20, 25, seed=2, corner_noise=0.0)
+        rng = np.random.default_rng(2)
+        for j, v in enumerate(views):
+            quiet = j % 4 == 0
+            corners = v.corners + rng.normal(0, 0.01 if quiet else 0.1, v.corners.shape) + [moved * quiet, 0.0]
+            views[j] = View(v.depth, corners, v.ids)
+        res = calibrate(views, BOARD)
+        stated[moved] = res.std["cx"], res.noise_std["cx"]
+        assert abs(res.K[0, 2] - 99.5) < 2 * res.std["cx"], (moved, res.K[0, 2], res.std["cx"])
+        assert any("weighted alike" in r for r in res.model.reasons) == bool(moved), res.model.reasons
+    assert stated[1.0][0] > 3 * stated[1.0][1], stated

@@ -332,6 +332,22 @@ def _widened(observations: list[bundle.Observations], fit: bundle.Fit, free: lis
                  "looked for), each as likely as the data make it, up to what the corners alone leave of it")
 
 
+def _reweighted(observations: list[bundle.Observations], fit: bundle.Fit, stated: bundle.Fit,
+                options: CalibrationOptions) -> tuple[bundle.Fit, str | None]:
+    """``stated`` with what the views' pixel weights choose in its covariance
+    (``bundle.reweighted``), and why the camera's uncertainty grew (None where it grew little)."""
+    raised, moved = bundle.reweighted(observations, fit, stated, options.depth_convention, options.loss)
+    before, after = stated.std(), raised.std()
+    grown = [name for name in moved if after[name] > 1.1 * before[name]]
+    if not grown:
+        return raised, None
+    return raised, ("weighted alike (OpenCV's weighting), not each by its own noise, the views' pixels move "
+                    + ", ".join(f"{name} {moved[name]:+.2f} px" for name in grown)
+                    + ", which their noise does not explain: views whose corners share an error their scatter does "
+                    "not show; the uncertainty includes the move ("
+                    + ", ".join(f"{name} ±{after[name]:.2f}" for name in grown) + " px)")
+
+
 def _calibrate(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
     convention = options.depth_convention
@@ -456,6 +472,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         say(averaged)
     noise_fit = fit
     stated = bundle.jackknifed(stated, estimates, free)
+    stated, weighted = _reweighted(observations, noise_fit, stated, options)
+    if weighted is not None:
+        model.reasons.append(weighted)
+        say(weighted)
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
