@@ -471,7 +471,6 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     assert np.max(np.abs(ddep)) < 2e-5, np.max(np.abs(ddep))
 
 
-
 def test_the_principal_point_counts_what_the_pixel_weights_choose():
     """Twenty views, every fourth quiet (0.01 px, against 0.1) and its corners 1 px to the right,
     as a detector's error on the nearest boards would put them (their scatter does not show it):

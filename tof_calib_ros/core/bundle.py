@@ -531,7 +531,7 @@ def _pooled_sandwich(views: list[Observations], fit: Fit, alike: Fit, convention
     n_pixel_rows = 2 * len(problem.view)
     share = np.ones(len(J.view))
     share[:n_pixel_rows] = (fit.sigma_px / alike.sigma_px)[np.repeat(problem.view, 2)] ** 2
-    bread = np.linalg.pinv(N.U - np.einsum("vgi,vij,vhj->gh", N.W, Vinv, N.W))
+    bread = global_covariance(N, True)
     return bread @ (profiled.T @ (profiled * share[:, None])) @ bread
 
 
