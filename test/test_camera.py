@@ -5,6 +5,7 @@ import pytest
 
 from tof_calib_ros.core.camera import (
     depth_of,
+    fold_distance,
     points_from_depth,
     project,
     rays,
@@ -78,3 +79,17 @@ def test_pose_jacobian_matches_finite_differences():
         dn[i] -= 1e-7
         fd = (transform(up[:3], up[3:], board)[0] - transform(dn[:3], dn[3:], board)[0]) / 2e-7
         np.testing.assert_allclose(J[:, :, i], fd, atol=1e-7)
+
+
+def test_a_lens_that_folds_back_inside_the_image_is_found_where_it_folds():
+    """Radial only, fx = fy: the model folds where d(r (1 + k1 r^2 + k2 r^4 + k3 r^6))/dr = 0,
+    at the first root r* of 1 + 3 k1 u + 5 k2 u^2 + 7 k3 u^3 (u = r^2), f r*(1 + ...) px out.
+    A k3 of -2 (7 real Kinect v2 views fitted it) folds inside a 512x424 image; a strong barrel
+    lens of the simulator does not, nor one whose fold lies beyond the image's corners."""
+    f, k1, k2, k3 = 370.0, 0.05, 0.25, -2.0
+    u = min(r.real for r in np.roots([7 * k3, 5 * k2, 3 * k1, 1]) if abs(r.imag) < 1e-12 and r.real > 0)
+    radius = f * np.sqrt(u) * (1 + k1 * u + k2 * u ** 2 + k3 * u ** 3)
+    assert radius < np.hypot(256, 212)
+    assert fold_distance(np.array([f, f, 256.0, 212.0, k1, k2, 0, 0, k3]), (512, 424)) == pytest.approx(radius, abs=1.0)
+    assert fold_distance(np.array([f, f, 256.0, 212.0, -0.3, 0.1, 1e-3, 1e-3, 0]), (512, 424)) is None
+    assert fold_distance(np.array([f, f, 256.0, 212.0, k1, k2, 0, 0, k3]), (128, 106)) is None

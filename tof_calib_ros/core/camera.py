@@ -121,6 +121,30 @@ def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float =
     return xy
 
 
+def fold_distance(params: np.ndarray, image_size: tuple[int, int], directions: int = 90,
+                  steps: int = 2000, reach: float = 4.0) -> float | None:
+    """How far from the principal point (px) the lens model folds back on itself inside the image,
+    None where it is one-to-one over the whole image. Beyond a fold the model is not the lens's:
+    fitted to views that leave the image's corners out, high-order terms (k3) can bend back
+    before them, and a pixel there then has no ray or two (on 7 real Kinect v2 views, a k3 of
+    -2 that fit them to 0.08 px put the views left out 25 px off). Searched along rays from the
+    axis, out to ``reach`` (normalised units) or until the model leaves the image."""
+    fx, fy, cx, cy = params[:4]
+    angle = np.linspace(0.0, 2 * np.pi, directions, endpoint=False)[:, None]
+    r = np.linspace(0.0, reach, steps + 1)[None, 1:]
+    xd, yd, dxy, _ = _distort(r * np.cos(angle), r * np.sin(angle), np.asarray(params[4:9], dtype=float), True)
+    u, v = fx * xd + cx, fy * yd + cy
+    w, h = image_size
+    inside = (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
+    before_leaving = np.cumsum(~inside, axis=1) == 0
+    folded = (dxy[..., 0, 0] * dxy[..., 1, 1] - dxy[..., 0, 1] * dxy[..., 1, 0] <= 0) & before_leaving
+    rows = np.flatnonzero(folded.any(axis=1))
+    if not rows.size:
+        return None
+    first = folded[rows].argmax(axis=1)   # where each ray folds; past it, the model turns back over the image
+    return float(np.min(np.hypot(u[rows, first] - cx, v[rows, first] - cy)))
+
+
 def rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
     """Viewing rays (N,3) with z = 1 through distorted pixels."""
     xy = undistort_normalized(pixels, params)
