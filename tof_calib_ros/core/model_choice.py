@@ -151,27 +151,29 @@ def choose_and_fit(prepared, plane_samples, obj, observations, state, scale: boo
         model.depth_bias = "+".join(t for t in bias_model.TERMS if t == "scale" or t in model.depth_bias.split("+"))
     fit, depths, planes, observations = joint(prepared, plane_samples, obj, observations, state, free, options, say)
     if options.distortion == "auto" and K3 in free:
-        folds = fold_distance(fit.state.intrinsics, prepared[0].depth.shape[::-1])
+        image_size = prepared[0].depth.shape[::-1]
+        folds = fold_distance(fit.state.intrinsics, image_size)
         if folds is not None:
-            without = _without_k3(prepared, plane_samples, obj, observations, fit, free, folds, options, model, say)
+            without = _without_k3(prepared, plane_samples, obj, observations, fit, free, folds, image_size, options,
+                                  model, say)
             if without is not None:
                 return without
     return Fitted(fit, free, model, depths, planes, observations)
 
 
 def _without_k3(prepared, plane_samples, obj, observations, fit: bundle.Fit, free: list[int], folds: float,
-                options: CalibrationOptions, model: Model, say) -> Fitted | None:
+                image_size: tuple[int, int], options: CalibrationOptions, model: Model, say) -> Fitted | None:
     """The joint fit without k3, where k3 folds the lens back inside the image nearer the centre
     than the lens without it does (None where it does not). k3 acts at the image's edge: fitted
     to views that leave it out, it can turn the lens back just beyond them (7 real Kinect v2 views
     took a k3 of -2, which fit them to 0.08 px and put the views left out 25 px off; without it,
     0.09 px), which is why ROS camera_calibration leaves it out; taken by the data's choice, it
     stays only where the lens it makes holds at least as far out."""
-    state = bundle.State(fit.state.intrinsics.copy(), fit.state.bias.copy(), fit.state.poses.copy())
+    state = fit.state.copy()
     state.intrinsics[K3] = 0.0
     fewer = [t for t in free if t != K3]
     alt, depths, planes, observations = joint(prepared, plane_samples, obj, observations, state, fewer, options, say)
-    alt_folds = fold_distance(alt.state.intrinsics, prepared[0].depth.shape[::-1])
+    alt_folds = fold_distance(alt.state.intrinsics, image_size)
     if alt_folds is not None and alt_folds <= folds:
         return None
     model.distortion = "plumb_bob"
