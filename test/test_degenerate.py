@@ -221,6 +221,17 @@ def test_all_depth_invalid(invalid, tilted):
     _good(_calibrate(views, "traditional"))
 
 
+def test_depth_on_the_board_in_one_view_only(tilted):
+    """One view's squares cannot size K: their size is (distance + offset) / focal length. With
+    the depth invalid in all views but one, the sizing once ran off (fx 80 times the truth,
+    refused for its depth RMS) or failed on a pose, each with a reason that blamed the corners."""
+    views = [View(f.depth if k == 0 else np.zeros_like(f.depth), f.corners) for k, f in enumerate(tilted)]
+    _refused(_calibrate(views, "depth"), "the depth shows the board in 1 of 4 views")
+    _good(_calibrate(views, "traditional"))
+    two = [View(f.depth if k < 2 else np.zeros_like(f.depth), f.corners) for k, f in enumerate(tilted)]
+    _good(_calibrate(two, "depth"))
+
+
 # ---------------------------------------------------------------------------------------------
 # corners that make the optimiser diverge
 

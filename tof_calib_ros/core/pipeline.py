@@ -56,6 +56,7 @@ CONTRADICTION_DEG = 5.0  # corners this far apart in tilt cannot be boards the d
 OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and the views recalibrated
 DEPTH_INFLATION_STEP = 2.0  # the depth's error is raised by this factor until the corners fit as well as alone
 MAX_DEPTH_INFLATION = 64.0  # and at most to this many times its noise: the depth is then all but silent
+MIN_SIZED_VIEWS = 2  # one view's squares size (distance + offset) / focal length, which the offset and K share
 
 
 def _spread_deg(normals: np.ndarray) -> float:
@@ -242,9 +243,11 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
             white_inliers.append(None)
             notes.append(f"view {v.index}: {exc}; used for its corners only")
             say(notes[-1])
-    if not first_planes:
-        raise CalibrationError("no view has usable depth on the board (0 or NaN, or too few pixels); "
-                               "method='traditional' calibrates from the corners alone")
+    if len(first_planes) < MIN_SIZED_VIEWS:   # with one, K ran off (fx 80 times the truth) or its pose failed
+        raise CalibrationError(f"the depth shows the board in {len(first_planes)} of {len(prepared)} views (0 or NaN, "
+                               f"or too few pixels, in the others), too few to size its squares (at least "
+                               f"{MIN_SIZED_VIEWS}): add views whose board the depth sees, or method='traditional' "
+                               "calibrates from the corners alone")
     _check_not_parallel(first_planes, corner_poses)
     squares = options.plane_squares
     squares_reason = ""
