@@ -66,10 +66,11 @@ def _spread_deg(normals: np.ndarray) -> float:
 
 
 def _check_not_parallel(planes: list[Plane], corner_poses: np.ndarray | None) -> None:
-    """Refuse views whose depth planes all face one way; ``corner_poses`` (OpenCV's, from the
-    corners alone) tell a board held at one tilt from depth images that do not show the board."""
+    """Refuse views whose depth planes (at least MIN_SIZED_VIEWS) all face one way; ``corner_poses``
+    (OpenCV's, from the corners alone) tell a board held at one tilt from depth images that do not
+    show the board."""
     spread = _spread_deg(np.array([p.normal for p in planes]))
-    if len(planes) < 2 or spread >= MIN_PARALLEL_SPREAD_DEG:
+    if spread >= MIN_PARALLEL_SPREAD_DEG:
         return
     if corner_poses is not None:
         n = len(corner_poses)
