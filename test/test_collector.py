@@ -9,6 +9,7 @@ from tof_calib_ros import Board, calibrate, sim
 from tof_calib_ros.collect import collector, motion, tracking
 from tof_calib_ros.collect.collector import AXES, CollectorConfig, ViewCollector
 from tof_calib_ros.core.camera import rays
+from tof_calib_ros.core.detection import Detection
 
 BOARD = Board(8, 6, 0.04)
 CAM = sim.pmd_camera()
@@ -152,6 +153,20 @@ def test_frames_without_a_board_are_rejected_with_the_reason():
     out = col.add(away.amplitude, away.depth, 0.1)
     assert not out.accepted and "no 8x6 board found" in out.reason
     assert col.progress()["last_reason"] == out.reason and col.progress()["frames"] == 2
+
+
+def test_a_lost_board_is_searched_by_the_detector_on_small_images_only(monkeypatch):
+    """Offline (thorough), a lost board is searched for by ``detect`` too where the quick search
+    misses boards held still (small images), not on larger ones, where the frames it misses are
+    mostly of a moving board and ``detect`` took about 1 s each at 640x576."""
+    searched = []
+    monkeypatch.setattr(tracking, "detect", lambda image, board, **_: searched.append(image.shape)
+                        or Detection(None, "no board"))
+    for shape in ((170, 205), (576, 640)):
+        gradient = np.zeros(shape, np.uint16) + np.arange(shape[1], dtype=np.uint16) * 50
+        assert tracking.BoardTracker(BOARD).locate(gradient, thorough=True).corners is None
+        assert tracking.BoardTracker(BOARD).locate(gradient, thorough=False).corners is None
+    assert searched == [(170, 205)]
 
 
 def test_a_board_at_the_image_border_is_partial():
