@@ -108,10 +108,9 @@ def _locate_chunk(sources: list[ImageSource], board: Board, config: CollectorCon
     """The per-frame work, in a worker: read the amplitude image and find the board, followed
     through a stream as the node does (``BoardTracker``), and searched for on every frame where it
     is lost (thoroughly on small images, ``BoardTracker``): offline there is time, and a lost view
-    is lost for good. A still
-    (a folder of images) has no such history, and nearly every still with a board is a view
-    worth keeping, so it is searched for as thoroughly and its accurate corners are found here
-    too. A Skip's ``where`` is left for the caller to fill."""
+    is lost for good. A still (a folder of images) has no such history, and nearly every still
+    with a board is a view worth keeping, so it is searched for thoroughly at any size and its
+    accurate corners are found here too. A Skip's ``where`` is left for the caller to fill."""
     out: list[Located | Skip] = []
     tracker = BoardTracker(board)
     for source in sources:
