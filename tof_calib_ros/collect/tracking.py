@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from ..core.board import Board
-from ..core.detection import UPSCALE_BELOW, Detection, detect, locate, sharpen, tone_map
+from ..core.detection import Detection, detect, locate, sharpen, small, tone_map
 from ..core.errors import CalibrationError
 
 # quick_locate(near=...): a corner followed from the previous frame may move this many squares
@@ -78,11 +78,11 @@ class BoardTracker:
     extrapolated when it was seen in the frame before too, ``quick_locate``); while it is not
     found, the whole image is searched every ``WHOLE_IMAGE_EVERY`` frames, or on every frame,
     thoroughly, when the caller has the time (``locate(thorough=True)``: offline, or the node with
-    no frame waiting). Thoroughly means by ``detect`` too only on images smaller than
-    ``UPSCALE_BELOW``, where the quick search misses boards held still (three in four at 205x170).
-    On larger ones it misses few (2 of 49 Kinect v2 views at 512x424), and a stream's frames where
-    it misses are mostly of a moving board: at 640x576 ``detect`` took about 1 s on each, 80 % of
-    a replay's time, and the boards it found there were all refused as moving."""
+    no frame waiting). Thoroughly means by ``detect`` too only on images it sees upscaled
+    (``small``: under 300 px), where the quick search misses boards held still (three in four at
+    205x170). On larger ones it misses few (2 of 49 Kinect v2 views at 512x424), and a stream's
+    frames where it misses are mostly of a moving board: at 640x576 ``detect`` took about 1 s on
+    each, 80 % of a replay's time, and the boards it found there were all refused as moving."""
 
     def __init__(self, board: Board) -> None:
         self.board = board
@@ -96,7 +96,7 @@ class BoardTracker:
     def locate(self, amplitude: np.ndarray, thorough: bool = False) -> Detection:
         found = quick_locate(amplitude, self.board, self._seen, self._before,
                              whole_image=thorough or self._misses % WHOLE_IMAGE_EVERY == 0,
-                             thorough=thorough and min(amplitude.shape) < UPSCALE_BELOW)
+                             thorough=thorough and small(amplitude))
         if found.corners is None:
             self._before = None
             self._misses += 1
@@ -121,7 +121,7 @@ def accurate_detect(amplitude: np.ndarray, board: Board, quick: np.ndarray, in_r
     region, origin = amplitude[y0:y1 + 1, x0:x1 + 1], np.array([x0, y0], dtype=float)
     found = sharpen(region, board, quick - origin)
     if found.corners is None:
-        found = detect(region, board, upscale=min(amplitude.shape) < UPSCALE_BELOW)
+        found = detect(region, board, upscale=small(amplitude))
     return found if found.corners is None else Detection(found.corners + origin, found.message)
 
 

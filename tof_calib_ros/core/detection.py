@@ -128,6 +128,12 @@ def tone_map(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(_stretch(image)), 0, 255).astype(np.uint8)
 
 
+def small(image: np.ndarray) -> bool:
+    """Whether the detector sees ``image`` upscaled first: the images where boards of a few pixels'
+    squares are missed without it, by the SB detector and by the quick search alike."""
+    return min(image.shape) < UPSCALE_BELOW
+
+
 def detect(image: np.ndarray, board: Board, *, refine: bool = True,
            upscale: bool | None = None, second_look: bool = True) -> Detection:
     """Corners and the reason behind the result, for logs and user feedback.
@@ -144,7 +150,7 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     gray = np.clip(np.rint(stretched), 0, 255).astype(np.uint8)
     fine = np.clip(stretched, 0, 255).astype(np.float32)  # unquantised, for cornerSubPix
     if upscale is None:
-        upscale = min(gray.shape) < UPSCALE_BELOW
+        upscale = small(gray)
     reasons = []
 
     # SB corners are not passed through cornerSubPix: the second look's ACCURACY mode is sub-pixel.
