@@ -117,7 +117,7 @@ def scaled_K(K: np.ndarray, scale: float) -> np.ndarray:
 def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs: dict | None) -> dict:
     print(f"\n== scale {scale}: {len(views)} views with a board, image "
           f"{views[0].depth.shape[1]}x{views[0].depth.shape[0]}")
-    refs, report = {}, {"scale": scale, "views": len(views), "reference": {}, "halves": {}, "few_view": []}
+    refs, report = {}, {"scale": scale, "views": len(views), "reference": {}, "halves": {}}
     print(f"{'method':18} {'fx':>16} {'fy':>16} {'cx':>16} {'cy':>16} {'px RMS':>7} {'s':>5}")
     for name, kwargs in METHODS.items():
         t0 = time.perf_counter()
@@ -167,6 +167,15 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
         print(f"  {name:18} dfx {diff[0]:+7.2f} ({rel[0]:+.2%})  dfy {diff[1]:+7.2f} ({rel[1]:+.2%})  "
               f"dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f}{verdict}")
         report["halves"][name] = diff + rel
+    if draws:
+        report["few_view"] = few_view(views, draws, jobs, refs)
+    report["refs_K"] = {n: k.tolist() for n, k in refs.items()}
+    return report
+
+
+def few_view(views: list[View], draws: int, jobs: int, refs: dict[str, np.ndarray]) -> list[dict]:
+    """Median focal error of random few-view calibrations against each all-view reference."""
+    rows = []
     jobs_list = [(n, 1000 * n + k) for n in VIEW_COUNTS for k in range(draws)]
     with Pool(jobs, initializer=_init, initargs=(views,)) as pool:
         runs = pool.map(draw, jobs_list, chunksize=1)
@@ -191,14 +200,13 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
             cells.append(f"{'':18} {e_t:7.4f} {e_o:7.4f} {row[m]['heldout_rms']:7.3f} {fails:4d} "
                          f"{row[m]['trusted']:7.0%} {row[m]['trusted_off']:3.0%}")
         print(f"{n:5d} | " + " | ".join(cells))
-        report["few_view"].append(row)
-    report["refs_K"] = {n: k.tolist() for n, k in refs.items()}
-    return report
+        rows.append(row)
+    return rows
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--draws", type=int, default=20)
+    ap.add_argument("--draws", type=int, default=20, help="few-view draws per view count; 0 skips them")
     ap.add_argument("--data", type=Path, default=DATA)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "kinect_real.json")
