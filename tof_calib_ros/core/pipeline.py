@@ -317,7 +317,8 @@ def _widened(observations: list[bundle.Observations], fit: bundle.Fit, free: lis
     """The fit with what the depth's model leaves open in its covariance, and why fx's
     uncertainty grew (None where it grew little)."""
     if bowed and N_INTRINSICS + 1 not in free:
-        # a bow common to the views, or the radial offset taken for it: a wiggle's bows alike too
+        # a bow common to the views, the radial offset taken for it, or an error over distance no
+        # wiggle looked for explains (the caller's ``bowed``): a wiggle's bows alike too
         # near frontal, and its slope is a scale; the data may fix the scale about the truth, not
         # about this fit's (a 15 mm wiggle taken for a radial offset put fx 2.4 % off), and as far
         # from it as they put the scale
@@ -459,8 +460,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             reason, estimates = why_yield(observations, fit, free, model, options, corners)
         if estimates is None:   # the folds of the last fit, whose estimate the widening leaves as it was
             estimates = bundle.fold_estimates(observations, fit, convention, CORNER_FOLDS, free, options.loss)
-        stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle,
-                                    corner_fit)
+        stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle, corner_fit)
         worse = None if refuted or corners is None or not unexplained \
             else less_certain(stated, estimates, free, corners)
         if worse is None or inflation >= MAX_DEPTH_INFLATION:
