@@ -1,12 +1,13 @@
 """The view collector against rendered streams: what it keeps, what it rejects and why."""
 import re
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import pytest
 
 from tof_calib_ros import Board, calibrate, sim
-from tof_calib_ros.collect import collector, motion, tracking
+from tof_calib_ros.collect import collector, motion, replay, tracking
 from tof_calib_ros.collect.collector import AXES, CollectorConfig, ViewCollector
 from tof_calib_ros.core.camera import rays
 from tof_calib_ros.core.detection import Detection
@@ -208,6 +209,83 @@ def test_a_full_set_swaps_its_most_redundant_view_for_a_new_one():
     assert out[-1].reason.startswith("accepted in place of a more redundant view")
     kept = {tuple(np.round(v.corners.mean(axis=0))) for v in col.views}
     assert len(col.views) == 4 and len(kept) == 4
+
+
+def test_accurate_corners_are_found_for_the_views_kept_only_and_a_view_they_lose_is_dropped(monkeypatch):
+    """Frames are judged by their quick corners; the accurate ones (tens of ms) are found when the
+    views are read, so a view swapped out before then never costs them."""
+    poses = [((100, 100), 0.7, 0), ((102, 100), 0.7, 0), ((100, 102), 0.7, 0), ((60, 60), 0.9, 30),
+             ((130, 80), 0.8, 25)]
+    frames = [_frame(_pose(*p), seed=i) for i, p in enumerate(poses)]
+    looked_at = []
+
+    def counted(amplitude, board, quick, in_region):
+        looked_at.append(tracking.accurate_detect(amplitude, board, quick, in_region))
+        return looked_at[-1]
+
+    monkeypatch.setattr(collector, "accurate_detect", counted)
+    col = ViewCollector(BOARD, CollectorConfig(max_views=4))
+    out = _feed(col, frames, dt=1.0)
+    assert all(o.accepted for o in out) and "in place of" in out[-1].reason and looked_at == []
+    assert len(col) == 4 and len(col.unsharpened()) == 4
+    views = col.views
+    assert len(looked_at) == 4 and col.unsharpened() == [] and col.dropped == []
+    # each view holds its accurate corners, not the quick ones it was judged by
+    assert all(np.array_equal(v.corners, found.corners) for v, found in zip(views, looked_at))
+    assert not any(np.array_equal(v.corners, o.corners) for v in views for o in out)
+    col.views
+    assert len(looked_at) == 4   # once each
+
+    # found elsewhere (another thread, the workers) and handed in; a lost board drops its view
+    col = ViewCollector(BOARD)
+    _feed(col, frames[:3], dt=1.0)
+    (k0, a0, q0), (k1, *_), (k2, *_) = col.unsharpened()
+    dropped = col.sharpen({k1: Detection(None, "no board"), k0: tracking.accurate_detect(a0, BOARD, q0, True),
+                           k2 + 1000: Detection(None, "a view no longer kept")})
+    assert dropped == ["the view taken at 1.000 s dropped: board lost by the accurate detector: no board"]
+    assert col.dropped == dropped and len(col) == 2 and [k for k, *_ in col.unsharpened()] == [k2]
+    assert len(col.views) == 2 and col.stamps == [0.0, 2.0]
+
+
+@dataclass
+class _Stream:
+    """A replayed frame held in memory (``replay.Frame``), and its amplitude (``replay.ImageSource``)."""
+
+    amplitude: np.ndarray
+    depth: np.ndarray
+    stamp: float
+    where: str = "memory"
+    nbytes: int = 0
+
+    def amplitude_source(self):
+        return self
+
+    def load(self):
+        return self.amplitude
+
+    def saved_corners(self):
+        return None
+
+    def decode(self):
+        return self.amplitude, self.depth
+
+
+def test_a_replay_finds_the_accurate_corners_once_its_views_are_known_and_counts_those_lost(monkeypatch):
+    frames = [_frame(_pose(*p), seed=i) for i, p in enumerate(SWEEP[:4])]
+    calls, accepted = [], []
+
+    def second_lost(amplitude, board, quick, in_region):
+        calls.append(len(accepted))
+        return Detection(None, "lost") if len(calls) == 2 else tracking.accurate_detect(amplitude, board, quick,
+                                                                                         in_region)
+
+    monkeypatch.setattr(replay, "accurate_detect", second_lost)
+    run = replay.Replay(BOARD, CollectorConfig(), on_outcome=lambda _f, _a, o: accepted.append(o.accepted))
+    summary = run.run(_Stream(f.amplitude, f.depth, float(i)) for i, f in enumerate(frames))
+    assert accepted == [True] * 4 and calls == [4] * 4   # after every frame was judged
+    assert summary.rejections == {"board lost by the accurate detector": 1}
+    assert len(run.collector) == 3 and summary.view_stamps == run.collector.stamps == [0.0, 2.0, 3.0]
+    assert run.collector.unsharpened() == [] and run.collector.dropped[0].endswith("lost")
 
 
 def test_another_image_size_is_rejected_until_reset(sweep_frames):

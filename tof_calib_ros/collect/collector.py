@@ -20,10 +20,15 @@ Rules (``CollectorConfig`` holds the numbers):
   the frame's own evidence judges it (``stills=True``);
 - when ``max_views`` are kept, a new view replaces the most redundant kept one (the one nearest
   to another), if it is farther from the rest than that one, and only where no axis' end is
-  lost: the set stays spread over the recording, and progress only ever rises.
+  lost: the set stays spread over the recording, and progress only ever rises;
+- a frame is judged by its quick corners; a kept view's accurate corners (``accurate_detect``,
+  tens of ms where a frame is judged in one) are found later (``sharpen``), where they hold up
+  no frame: in another thread or process, or when the views are read. A view swapped out before
+  then never costs them, and one whose accurate corners fail is dropped.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass, replace
@@ -147,12 +152,13 @@ class Outcome:
 class ViewCollector:
     """Keeps the frames worth calibrating from, copied, and nothing of the rest of the stream.
 
-    Not thread safe: feed it from one thread.
+    Not thread safe: feed it from one thread, or under one lock.
     """
 
     def __init__(self, board: Board, config: CollectorConfig | None = None) -> None:
         self.board = board
         self.config = CollectorConfig() if config is None else config
+        self._key = itertools.count()   # names a kept view for ``sharpen``, across resets
         self.reset()
 
     def reset(self) -> None:
@@ -160,16 +166,52 @@ class ViewCollector:
         self._views: list[View] = []
         self._params: list[np.ndarray] = []
         self._stamps: list[float] = []
+        self._keys: list[int] = []
+        self._quick: dict[int, np.ndarray] = {}   # key -> quick corners, of the views still to sharpen
+        self.dropped: list[str] = []               # why views were dropped when sharpened
         self._size: tuple[int, int] | None = None
         self._previous: tuple[float, np.ndarray] | None = None  # stamp and corners of the last frame
         self._sharp: deque[float] = deque(maxlen=SHARP_HISTORY)  # narrower edge widths of recent boards
         self._frames = 0
         self._last_reason = "no frame yet"
 
+    def __len__(self) -> int:
+        """Views kept, those still to sharpen included."""
+        return len(self._views)
+
     @property
     def views(self) -> list[View]:
-        """The kept views, oldest first, ready for ``calibrate``."""
+        """The kept views, oldest first, ready for ``calibrate``: those still without their
+        accurate corners are sharpened first, here."""
+        self.sharpen()
         return list(self._views)
+
+    def unsharpened(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """(key, amplitude, quick corners) of the kept views still without accurate corners,
+        oldest first, for a caller that finds them elsewhere and hands them to ``sharpen``."""
+        return [(k, v.amplitude, self._quick[k]) for k, v in zip(self._keys, self._views) if k in self._quick]
+
+    def sharpen(self, found: dict[int, Detection] | None = None) -> list[str]:
+        """Give kept views their accurate corners: ``found``'s, by ``unsharpened``'s key (keys of
+        views no longer kept are ignored), or, with None, every view's still to find, found here.
+        A view whose accurate corners are lost or stray from its quick ones is dropped; why, for
+        each, is returned and added to ``dropped``."""
+        if found is None:
+            found = {k: accurate_detect(a, self.board, q, self.config.detect_in_region)
+                     for k, a, q in self.unsharpened()}
+        reasons = []
+        for key, accurate in found.items():
+            if key not in self._quick:
+                continue
+            i = self._keys.index(key)
+            problem = _disagreement(self._quick.pop(key), accurate)
+            if problem is None:
+                self._views[i] = replace(self._views[i], corners=accurate.corners.copy())
+            else:
+                reasons.append(f"the view taken at {self._stamps[i]:.3f} s dropped: {problem}")
+                self._remove(i)
+        self.dropped += reasons
+        return reasons
 
     @property
     def stamps(self) -> list[float]:
@@ -250,18 +292,19 @@ class ViewCollector:
         moving = self._motion(previous, stamp, corners, amplitude, depth_m)
         if moving:
             return Outcome(False, moving, params, corners)
-        # Worth keeping: now the accurate corners, which must agree with the quick ones.
-        accurate = accurate_detect(amplitude, self.board, corners, cfg.detect_in_region) if detected is None \
-            else detected
-        if accurate.corners is None:
-            return Outcome(False, f"board lost by the accurate detector: {accurate.message}", params, corners)
-        offset = float(np.sqrt(np.mean(np.sum((accurate.corners - corners) ** 2, axis=1))))
-        if offset > QUICK_AGREEMENT_PX:
-            return Outcome(False, f"the quick and accurate detections disagree by {offset:.1f} px RMS", params,
-                           corners)
-        corners = accurate.corners
+        # Worth keeping. Accurate corners found already (a still's, by a worker) must agree with
+        # the quick ones; otherwise they are found later (``sharpen``).
+        if detected is not None:
+            problem = _disagreement(corners, detected)
+            if problem is not None:
+                return Outcome(False, problem, params, corners)
+            corners = detected.corners
         if replaced is not None:
-            del self._views[replaced], self._params[replaced], self._stamps[replaced]
+            self._remove(replaced)
+        key = next(self._key)
+        if detected is None:
+            self._quick[key] = corners
+        self._keys.append(key)
         self._views.append(View(depth=depth_in_metres(depth_m).astype(np.float32), corners=corners.copy(),
                                 amplitude=amplitude.copy()))
         self._params.append(params)
@@ -271,6 +314,10 @@ class ViewCollector:
             return Outcome(True, f"accepted in place of a more redundant view ({cfg.max_views} views kept)", params,
                            corners)
         return Outcome(True, f"accepted as view {len(self._views)}", params, corners)
+
+    def _remove(self, i: int) -> None:
+        del self._views[i], self._params[i], self._stamps[i]
+        self._quick.pop(self._keys.pop(i), None)
 
     def _redundant(self, params: np.ndarray) -> int | None:
         """The kept view a new one at ``params`` should replace once the set is full: the one
@@ -372,3 +419,13 @@ def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) 
     q = points - points.mean(axis=0)
     normal = np.linalg.eigh(q.T @ q)[1][:, 0]
     return float(np.degrees(np.arccos(min(abs(normal[2]), 1.0))))
+
+
+def _disagreement(quick: np.ndarray, accurate: Detection) -> str | None:
+    """Why a view's accurate corners cannot stand for its quick ones, or None."""
+    if accurate.corners is None:
+        return f"board lost by the accurate detector: {accurate.message}"
+    offset = float(np.sqrt(np.mean(np.sum((accurate.corners - quick) ** 2, axis=1))))
+    if offset > QUICK_AGREEMENT_PX:
+        return f"the quick and accurate detections disagree by {offset:.1f} px RMS"
+    return None

@@ -15,6 +15,7 @@ of order, unreadable files) are skipped and counted by kind, never raised.
 """
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import re
@@ -22,6 +23,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
+from multiprocessing.pool import Pool
 from typing import Protocol
 
 import cv2
@@ -242,13 +244,39 @@ class Replay:
         self._on_skip = on_skip or (lambda _s: None)
 
     def run(self, frames: Iterable[Frame | Skip]) -> Summary:
-        for frame, result in self._located(frames):
-            if isinstance(result, Skip):
-                self._skip(replace(result, where=frame.where))
-            else:
-                self._judge(frame, result)
-            self._progress(self.summary, self.collector)
+        with self._pool() as pool:
+            for frame, result in self._located(frames, pool):
+                if isinstance(result, Skip):
+                    self._skip(replace(result, where=frame.where))
+                else:
+                    self._judge(frame, result)
+                self._progress(self.summary, self.collector)
+            self._sharpen(pool)
         return self.summary
+
+    def _sharpen(self, pool: Pool | None) -> None:
+        """The kept views' accurate corners, in the workers, only now that the views are known: a
+        view swapped out on the way never costs them (about half of those a 1,000-frame
+        recording at 200x200 would have cost), and whichever worker finds them, the views are the same."""
+        with self._lock:
+            todo = self.collector.unsharpened()
+        work = [(amplitude, self.board, quick, self.collector.config.detect_in_region) for _, amplitude, quick in todo]
+        if pool is None:
+            with single_threaded():   # as in a worker
+                found = list(itertools.starmap(accurate_detect, work))
+        else:
+            found = pool.starmap(accurate_detect, work)
+        with self._lock:
+            dropped = self.collector.sharpen({key: f for (key, *_), f in zip(todo, found)})
+            self.summary.view_stamps = self.collector.stamps
+        for reason in dropped:
+            self.summary.rejections[reason_key(reason.split(": ", 1)[1])] += 1
+
+    def _pool(self) -> AbstractContextManager:
+        """The worker processes, or None (nullcontext) for one worker: this process does it all."""
+        if self.workers == 1:
+            return nullcontext()
+        return worker_context().Pool(self.workers, initializer=init_worker)
 
     def _skip(self, skip: Skip) -> None:
         self.summary.skip(skip)
@@ -274,8 +302,9 @@ class Replay:
         else:
             s.rejections[reason_key(outcome.reason)] += 1
 
-    def _located(self, frames: Iterable[Frame | Skip]) -> Iterator[tuple[Frame, Located | Skip]]:
-        """Each frame with what a worker found in its amplitude image, in order."""
+    def _located(self, frames: Iterable[Frame | Skip], pool: Pool | None) -> Iterator[tuple[Frame, Located | Skip]]:
+        """Each frame with what a worker (of ``pool``; this process without) found in its
+        amplitude image, in order."""
         config = self.collector.config
         # a still depends on no other frame, and costs a whole detection: one per task balances best
         chunks = _chunks(frames, self.summary.skip, 1 if config.stills else CHUNK_FRAMES)
@@ -283,18 +312,17 @@ class Replay:
         def work(chunk: list[Frame]) -> tuple:
             return [f.amplitude_source() for f in chunk], self.board, config
 
-        if self.workers == 1:   # here, as single-threaded as a worker: one worker means one core
+        if pool is None:   # here, as single-threaded as a worker: one worker means one core
             with single_threaded():
                 for chunk in chunks:
                     yield from zip(chunk, _locate_chunk(*work(chunk)))
             return
-        with worker_context().Pool(self.workers, initializer=init_worker) as pool:
-            pending: deque = deque()
-            for chunk in chunks:
-                pending.append((chunk, pool.apply_async(_locate_chunk, work(chunk))))
-                if len(pending) > self.workers:   # one running in each worker, one waiting
-                    chunk, result = pending.popleft()
-                    yield from zip(chunk, result.get())
-            while pending:
+        pending: deque = deque()
+        for chunk in chunks:
+            pending.append((chunk, pool.apply_async(_locate_chunk, work(chunk))))
+            if len(pending) > self.workers:   # one running in each worker, one waiting
                 chunk, result = pending.popleft()
                 yield from zip(chunk, result.get())
+        while pending:
+            chunk, result = pending.popleft()
+            yield from zip(chunk, result.get())

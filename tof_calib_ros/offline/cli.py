@@ -91,7 +91,7 @@ def _coverage(collector: ViewCollector) -> str:
 
 
 def _views_and_coverage(collector: ViewCollector) -> str:
-    return f"views {len(collector.views)} | coverage {_coverage(collector)}"
+    return f"views {len(collector)} | coverage {_coverage(collector)}"
 
 
 class Progress:
@@ -164,7 +164,7 @@ def _collect(args: argparse.Namespace, board: Board, frames: Iterable[Frame | Sk
 
 def _print_summary(summary: Summary, collector: ViewCollector, unpaired: dict[str, int] | None = None,
                    unstamped: int = 0) -> None:
-    print(f"frames: {summary.frames} judged, {summary.boards} with a board, {len(collector.views)} views kept")
+    print(f"frames: {summary.frames} judged, {summary.boards} with a board, {len(collector)} views kept")
     print(f"coverage: {_coverage(collector)}")
     if summary.rejections:
         print("not kept: " + ", ".join(f"{n} {reason}" for reason, n in summary.rejections.most_common()))
@@ -190,7 +190,7 @@ def _require_views(summary: Summary, collector: ViewCollector, board: Board, vie
     if summary.boards == 0:
         raise Failure(EXIT_NO_BOARD, f"no {board.cols}x{board.rows} board found in any of {summary.frames} frames "
                                      "(--size counts interior corners, as camera_calibration does)")
-    n = len(collector.views)
+    n = len(collector)
     if n < views_min:
         why = []
         for what, counts in (("frames were rejected as", summary.rejections), ("messages were skipped as",

@@ -8,7 +8,8 @@ calibrates on request, publishes the CameraInfo and commits it to the driver.
 Threads: subscriptions only pair frames and queue them (``QUEUE_PAIRS`` deep, the oldest dropped),
 so the executor never falls behind the camera; one worker thread detects boards and collects views
 (a board held still is followed from frame to frame, not searched for anew); services run in
-their own callback group, so a calibration never blocks the topics. The calibration itself runs
+their own callback group, so a calibration never blocks the topics. A kept view's accurate corners
+are found in a thread of their own (``_sharpen``), while the worker judges the next frames. The calibration itself runs
 in a worker process (``CalibrationWorker``), out of reach of the frames' share of the GIL, while
 a thread encodes the views' files. While it runs, the view worker drops the frames (counted as
 dropped): the calibration could not use their views, and gets the CPU instead.
@@ -40,7 +41,7 @@ from ..collect.board_picture import draw
 from ..collect.collector import Outcome, ViewCollector
 from ..collect.replay import Replay, Summary
 from ..collect.stamp_sync import StampSync
-from ..collect.tracking import BoardTracker
+from ..collect.tracking import BoardTracker, accurate_detect
 from ..files.bag_io import BagError, BagFrame, BagSource
 from ..files.calibration_file import EncodedViews, encode_views, monocular_fields
 from ..files.image_decode import ImageError, decode_image, depth_to_metres
@@ -123,6 +124,7 @@ class CalibrationNode(Node):
         self._calibrating = threading.Lock()
         self._calibrator = CalibrationWorker()
         self._encoder = ThreadPoolExecutor(1, thread_name_prefix="encode_views")
+        self._sharpener = ThreadPoolExecutor(1, thread_name_prefix="sharpen_views")
         self._stop = False
         self._generation = 0                   # counts resets: a frame from before one is not collected
         self._tracker = BoardTracker(self.board)   # where to look for the board first (worker thread only)
@@ -265,7 +267,25 @@ class CalibrationNode(Node):
             if generation != self._generation:
                 return
             outcome = self.collector.add(amplitude, depth, stamp, located=found)
+        if outcome.accepted:
+            self._sharpener.submit(self._sharpen)
         self._judged(amplitude, outcome, stamp)
+
+    def _sharpen(self) -> None:
+        """The accurate corners of the oldest kept view still without them (tens of ms, nearly all
+        in OpenCV, which lets go of the GIL), found while the worker judges the next frames. A view
+        the worker swapped out or a reset cleared meanwhile is ignored by ``sharpen``."""
+        try:
+            with self._lock:
+                todo = self.collector.unsharpened()[:1]
+            for key, amplitude, quick in todo:
+                found = accurate_detect(amplitude, self.board, quick, self.collector.config.detect_in_region)
+                with self._lock:
+                    dropped = self.collector.sharpen({key: found})
+                for reason in dropped:
+                    self._problem("view", reason)
+        except Exception as exc:  # noqa: BLE001 - the calibration sharpens what is left itself
+            self._problem("internal", f"accurate corners not found: {exc!r}")
 
     def _judged(self, amplitude: np.ndarray, outcome: Outcome, stamp: float) -> None:
         """What follows a frame's judgement, live or replayed: the log, the diagnostics, the picture."""
@@ -337,7 +357,7 @@ class CalibrationNode(Node):
         if self._stop:
             return
         with self._lock:
-            n = len(self.collector.views)
+            n = len(self.collector)
         log.info(f"replayed {path}: {summary.frames} frame pairs, {sum(summary.skipped.values())} skipped, "
                  f"{n} views kept")
         success, message = self._calibrate()
@@ -430,7 +450,7 @@ class CalibrationNode(Node):
         with self._lock, self._wake:   # frames paired before the reset are not to be collected after it
             self._frames.clear()
             self._generation += 1
-            n = len(self.collector.views)
+            n = len(self.collector)
             self.collector.reset()
         self.last_problem = ""
         resp.success, resp.message = True, f"cleared {n} views"
@@ -488,6 +508,7 @@ class CalibrationNode(Node):
         self._worker.join(timeout=2.0)
         self._calibrator.close()
         self._encoder.shutdown(wait=False, cancel_futures=True)
+        self._sharpener.shutdown(wait=False, cancel_futures=True)
         super().destroy_node()
 
 
