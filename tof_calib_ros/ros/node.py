@@ -378,7 +378,10 @@ class CalibrationNode(Node):
             return False, "a calibration is already running; call again when it is done"
         try:
             with self._lock:
-                views = list(self.collector.views)
+                dropped = self.collector.sharpen()   # what the sharpening thread has not reached yet
+                views = self.collector.views
+            for reason in dropped:
+                self._problem("view", reason)
             need = self._param("views.min")
             if len(views) < need:
                 return False, self._too_few(len(views), need)
