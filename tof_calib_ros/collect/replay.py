@@ -7,8 +7,9 @@ process. Only the amplitude images go to the workers and only the corners come b
 process decodes the images it judges itself. At most one chunk more than there are workers is
 under way, so memory does not grow with the recording. Within a chunk the board is followed
 from frame to frame (``quick_locate(near=...)``): a board held still for calibration is where
-it was. The chunking is the same for any number of workers, so one worker and two give the
-same views.
+it was. The kept views' accurate corners are found in the workers too, once every frame is
+judged (``Replay._sharpen``). The chunking is the same for any number of workers, so one worker
+and two give the same views.
 
 Frames that cannot be used (undecodable, wrong encoding, bad layout, another size, stamps out
 of order, unreadable files) are skipped and counted by kind, never raised.
