@@ -27,13 +27,13 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from multiprocessing import Pool
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate
+from tof_calib_ros.collect.replay import worker_context
 from tof_calib_ros.core.detection import detect_corners
 
 BOARD = Board(5, 7, 0.03)
@@ -177,7 +177,8 @@ def few_view(views: list[View], draws: int, jobs: int, refs: dict[str, np.ndarra
     """Median focal error of random few-view calibrations against each all-view reference."""
     rows = []
     jobs_list = [(n, 1000 * n + k) for n in VIEW_COUNTS for k in range(draws)]
-    with Pool(jobs, initializer=_init, initargs=(views,)) as pool:
+    # fresh workers: a child forked after this process's OpenCV ran may hang in its first detection
+    with worker_context().Pool(jobs, initializer=_init, initargs=(views,)) as pool:
         runs = pool.map(draw, jobs_list, chunksize=1)
     names = list(METHODS)
     print(f"few-view, median of {draws} draws: relative focal error vs each all-view reference; "

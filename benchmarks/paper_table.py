@@ -36,13 +36,13 @@ import argparse
 import json
 import sys
 import time
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import binomtest
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
+from tof_calib_ros.collect.replay import worker_context
 from tof_calib_ros.core.depth_bias import wiggle_period
 from tof_calib_ros.sim.bound import Bound, Scene, mean_3d_error
 
@@ -166,7 +166,7 @@ def main() -> None:
              k < args.bound_trials) for s, r, i, c in cells for k in range(args.trials)]
     t0 = time.time()
     runs = []
-    with Pool(args.jobs) as pool:
+    with worker_context().Pool(args.jobs) as pool:   # fresh workers, not forks of this process
         for run in pool.imap(trial, jobs, chunksize=4):
             runs.append(run)
             if len(runs) % 100 == 0 or len(runs) == len(jobs):   # an hour's run says where it is
