@@ -170,6 +170,38 @@ def test_a_lost_board_is_searched_by_the_detector_on_small_images_only(monkeypat
     assert searched == [(170, 205)]
 
 
+@pytest.mark.parametrize("cols, rows", [(3, 3), (4, 3), (7, 5), (11, 8)])
+def test_a_corner_stuck_off_the_grid_is_never_followed(cols, rows):
+    """Following a board checks that every corner lies on the grid a homography through all of
+    them predicts, robustly (LMEDS), or a corner stuck on the wrong saddle would pass; the
+    least-squares fit alone decides only where no stuck corner could hide in it (a corner
+    displaced by e stands at least (1 - its leverage) e off that fit: checked here one by one)."""
+    board = Board(cols, rows, 0.04)
+    ids = np.arange(board.n_corners)
+    grid = np.column_stack([ids % cols, ids // cols]).astype(float)
+    leverage = tracking._grid_leverage(cols, rows)
+    rng = np.random.default_rng(cols * rows)
+    for _ in range(200):
+        square = rng.uniform(8, 40)
+        H = np.diag([square, square, 1.0])
+        H[:2, :2] = cv2.Rodrigues(np.array([0, 0, rng.uniform(-np.pi, np.pi)]))[0][:2, :2] * square
+        H[:2, 2], H[2, :2] = rng.uniform(50, 300, 2), rng.uniform(-0.01, 0.01, 2)
+        points = cv2.perspectiveTransform(grid[None], H)[0] + rng.normal(0, 0.05, (len(grid), 2))
+        tolerance = tracking.FOLLOW_GRID_TOLERANCE * square
+        assert tracking._grid_homography(grid, points, board, tolerance) is not None
+        stuck = points.copy()
+        k = rng.choice(len(grid), rng.integers(1, 3), replace=False)
+        direction = rng.normal(size=(len(k), 2))
+        stuck[k] += direction / np.linalg.norm(direction, axis=1)[:, None] * rng.uniform(1.1, 4, (len(k), 1)) * tolerance
+        assert tracking._grid_homography(grid, stuck, board, tolerance) is None
+        one = points.copy()
+        i = rng.integers(len(grid))
+        one[i] += rng.normal(size=2)
+        fit, _ = cv2.findHomography(grid, one, 0)
+        moved = np.linalg.norm(one[i] - points[i])
+        assert np.linalg.norm(cv2.perspectiveTransform(grid[None], fit)[0][i] - one[i]) >= (1 - leverage) * moved - 0.2
+
+
 def test_a_board_at_the_image_border_is_partial():
     f = _frame(_pose((100, 100), 0.7), seed=1)
     col = ViewCollector(BOARD, CollectorConfig(border_px=60))  # a wide margin puts the board in it

@@ -8,6 +8,8 @@ with the camera.
 """
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -138,6 +140,39 @@ def _region(corners: np.ndarray, margin: float, shape: tuple[int, int]) -> tuple
             np.minimum(np.ceil(corners.max(axis=0) + margin), [w - 1, h - 1]).astype(int))
 
 
+def _off_grid(grid: np.ndarray, points: np.ndarray, H: np.ndarray | None) -> float:
+    return np.inf if H is None else float(np.linalg.norm(cv2.perspectiveTransform(grid[None], H)[0] - points,
+                                                         axis=1).max())
+
+
+@functools.lru_cache(maxsize=8)
+def _grid_leverage(cols: int, rows: int) -> float:
+    """The largest leverage of a corner of a ``cols`` x ``rows`` grid in a homography's
+    least-squares fit (of a square view; perspective changes it little): a corner displaced by
+    e moves off that fit by at least (1 - leverage) e."""
+    x, y = (np.arange(cols * rows) % cols).astype(float), (np.arange(cols * rows) // cols).astype(float)
+    x, y = x - x.mean(), y - y.mean()
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    J = np.empty((2 * len(x), 8))
+    J[0::2] = np.column_stack([x, y, one, zero, zero, zero, -x * x, -x * y])
+    J[1::2] = np.column_stack([zero, zero, zero, x, y, one, -x * y, -y * y])
+    hat = J @ np.linalg.pinv(J)
+    return max(float(np.linalg.eigvalsh(hat[2 * i:2 * i + 2, 2 * i:2 * i + 2]).max()) for i in range(len(x)))
+
+
+def _grid_homography(grid: np.ndarray, points: np.ndarray, board: Board, tolerance: float) -> np.ndarray | None:
+    """The homography from the board's grid to ``points`` if every point lies within
+    ``tolerance`` of it, else None. Robust (LMEDS), so that a few corners stuck elsewhere show;
+    but where the least-squares fit leaves every point well within what a stuck corner would
+    leave (half of (1 - its leverage) the tolerance), none is stuck, and LMEDS, ten times its
+    cost and a third of following a board, is not needed."""
+    H, _ = cv2.findHomography(grid, points, 0)
+    if _off_grid(grid, points, H) <= 0.5 * (1 - _grid_leverage(board.cols, board.rows)) * tolerance:
+        return H
+    H, _ = cv2.findHomography(grid, points, cv2.LMEDS)
+    return H if _off_grid(grid, points, H) <= tolerance else None
+
+
 def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: float) -> np.ndarray | None:
     """The corners refined (cornerSubPix) from where they are expected, or None unless they are
     surely the board's: no corner moved more than ``FOLLOW_MAX_MOVE`` squares, every one lies
@@ -170,9 +205,8 @@ def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: f
         return None
     ids = np.arange(board.n_corners)
     grid = np.column_stack([ids % board.cols, ids // board.cols]).astype(float)   # in squares
-    H, _ = cv2.findHomography(grid, local, cv2.LMEDS)   # robust: a few corners stuck elsewhere must show
-    if H is None or np.linalg.norm(cv2.perspectiveTransform(grid[None], H)[0] - local, axis=1).max() \
-            > FOLLOW_GRID_TOLERANCE * square:
+    H = _grid_homography(grid, local, board, FOLLOW_GRID_TOLERANCE * square)
+    if H is None:
         return None
     i, j = np.meshgrid(np.arange(-1, board.cols) + 0.5, np.arange(-1, board.rows) + 0.5)
     centres = cv2.perspectiveTransform(np.column_stack([i.ravel(), j.ravel()])[None], H)[0].astype(np.float32)
