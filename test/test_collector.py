@@ -192,7 +192,8 @@ def test_a_corner_stuck_off_the_grid_is_never_followed(cols, rows):
         stuck = points.copy()
         k = rng.choice(len(grid), rng.integers(1, 3), replace=False)
         direction = rng.normal(size=(len(k), 2))
-        stuck[k] += direction / np.linalg.norm(direction, axis=1)[:, None] * rng.uniform(1.1, 4, (len(k), 1)) * tolerance
+        far = rng.uniform(1.1, 4, (len(k), 1)) * tolerance
+        stuck[k] += direction / np.linalg.norm(direction, axis=1)[:, None] * far
         assert tracking._grid_homography(grid, stuck, board, tolerance) is None
         one = points.copy()
         i = rng.integers(len(grid))
