@@ -177,8 +177,7 @@ def test_a_corner_stuck_off_the_grid_is_never_followed(cols, rows):
     least-squares fit alone decides only where no stuck corner could hide in it (a corner
     displaced by e stands at least (1 - its leverage) e off that fit: checked here one by one)."""
     board = Board(cols, rows, 0.04)
-    ids = np.arange(board.n_corners)
-    grid = np.column_stack([ids % cols, ids // cols]).astype(float)
+    grid = tracking._grid(cols, rows)
     leverage = tracking._grid_leverage(cols, rows)
     rng = np.random.default_rng(cols * rows)
     for _ in range(200):
@@ -188,13 +187,13 @@ def test_a_corner_stuck_off_the_grid_is_never_followed(cols, rows):
         H[:2, 2], H[2, :2] = rng.uniform(50, 300, 2), rng.uniform(-0.01, 0.01, 2)
         points = cv2.perspectiveTransform(grid[None], H)[0] + rng.normal(0, 0.05, (len(grid), 2))
         tolerance = tracking.FOLLOW_GRID_TOLERANCE * square
-        assert tracking._grid_homography(grid, points, board, tolerance) is not None
+        assert tracking._grid_homography(board, points, tolerance) is not None
         stuck = points.copy()
         k = rng.choice(len(grid), rng.integers(1, 3), replace=False)
         direction = rng.normal(size=(len(k), 2))
         far = rng.uniform(1.1, 4, (len(k), 1)) * tolerance
         stuck[k] += direction / np.linalg.norm(direction, axis=1)[:, None] * far
-        assert tracking._grid_homography(grid, stuck, board, tolerance) is None
+        assert tracking._grid_homography(board, stuck, tolerance) is None
         one = points.copy()
         i = rng.integers(len(grid))
         one[i] += rng.normal(size=2)

@@ -140,6 +140,15 @@ def _region(corners: np.ndarray, margin: float, shape: tuple[int, int]) -> tuple
             np.minimum(np.ceil(corners.max(axis=0) + margin), [w - 1, h - 1]).astype(int))
 
 
+@functools.lru_cache(maxsize=8)
+def _grid(cols: int, rows: int) -> np.ndarray:
+    """The board's corners in squares, row by row as detected (read-only: it is shared)."""
+    ids = np.arange(cols * rows)
+    grid = np.column_stack([ids % cols, ids // cols]).astype(float)
+    grid.setflags(write=False)
+    return grid
+
+
 def _off_grid(grid: np.ndarray, points: np.ndarray, H: np.ndarray | None) -> float:
     return np.inf if H is None else float(np.linalg.norm(cv2.perspectiveTransform(grid[None], H)[0] - points,
                                                          axis=1).max())
@@ -150,8 +159,7 @@ def _grid_leverage(cols: int, rows: int) -> float:
     """The largest leverage of a corner of a ``cols`` x ``rows`` grid in a homography's
     least-squares fit (of a square view; perspective changes it little): a corner displaced by
     e moves off that fit by at least (1 - leverage) e."""
-    x, y = (np.arange(cols * rows) % cols).astype(float), (np.arange(cols * rows) // cols).astype(float)
-    x, y = x - x.mean(), y - y.mean()
+    x, y = (_grid(cols, rows) - _grid(cols, rows).mean(axis=0)).T
     one, zero = np.ones_like(x), np.zeros_like(x)
     J = np.empty((2 * len(x), 8))
     J[0::2] = np.column_stack([x, y, one, zero, zero, zero, -x * x, -x * y])
@@ -160,12 +168,13 @@ def _grid_leverage(cols: int, rows: int) -> float:
     return max(float(np.linalg.eigvalsh(hat[2 * i:2 * i + 2, 2 * i:2 * i + 2]).max()) for i in range(len(x)))
 
 
-def _grid_homography(grid: np.ndarray, points: np.ndarray, board: Board, tolerance: float) -> np.ndarray | None:
-    """The homography from the board's grid to ``points`` if every point lies within
+def _grid_homography(board: Board, points: np.ndarray, tolerance: float) -> np.ndarray | None:
+    """The homography from the board's grid (``_grid``) to ``points`` if every point lies within
     ``tolerance`` of it, else None. Robust (LMEDS), so that a few corners stuck elsewhere show;
     but where the least-squares fit leaves every point well within what a stuck corner would
     leave (half of (1 - its leverage) the tolerance), none is stuck, and LMEDS, ten times its
     cost and a third of following a board, is not needed."""
+    grid = _grid(board.cols, board.rows)
     H, _ = cv2.findHomography(grid, points, 0)
     if _off_grid(grid, points, H) <= 0.5 * (1 - _grid_leverage(board.cols, board.rows)) * tolerance:
         return H
@@ -203,9 +212,7 @@ def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: f
     cv2.cornerSubPix(image, pts, (half, half), (-1, -1), criteria)
     if np.linalg.norm(pts.reshape(-1, 2) - local, axis=1).max() > FOLLOW_CONVERGED_PX:
         return None
-    ids = np.arange(board.n_corners)
-    grid = np.column_stack([ids % board.cols, ids // board.cols]).astype(float)   # in squares
-    H = _grid_homography(grid, local, board, FOLLOW_GRID_TOLERANCE * square)
+    H = _grid_homography(board, local, FOLLOW_GRID_TOLERANCE * square)
     if H is None:
         return None
     i, j = np.meshgrid(np.arange(-1, board.cols) + 0.5, np.arange(-1, board.rows) + 0.5)
