@@ -5,7 +5,8 @@
    OpenCV's own default), and each principal point against OpenCV's with the same lens terms;
    the downsampled runs are scored against the full-resolution references, scaled (a calibration
    of the downsampled views themselves would carry the very bias under test).
-2. Its stability: the odd and the even views calibrated separately.
+2. Its stability: the odd and the even views calibrated separately, and the first and the second
+   half of the recording (the files' order), which cover other image regions and distances.
 3. Few-view calibrations (3 to 7 random views, 20 draws each): focal error against the
    all-view references, and re-projection RMS on the views left out (each left-out view's
    pose found by solvePnP with the calibration under test), how often it is trusted, and how
@@ -117,7 +118,7 @@ def scaled_K(K: np.ndarray, scale: float) -> np.ndarray:
 def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs: dict | None) -> dict:
     print(f"\n== scale {scale}: {len(views)} views with a board, image "
           f"{views[0].depth.shape[1]}x{views[0].depth.shape[0]}")
-    refs, report = {}, {"scale": scale, "views": len(views), "reference": {}, "halves": {}}
+    refs, report = {}, {"scale": scale, "views": len(views), "reference": {}}
     print(f"{'method':18} {'fx':>16} {'fy':>16} {'cx':>16} {'cy':>16} {'px RMS':>7} {'s':>5}")
     for name, kwargs in METHODS.items():
         t0 = time.perf_counter()
@@ -150,27 +151,36 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
               + ", ".join(f"{n} fx {k[0, 0]:.2f} fy {k[1, 1]:.2f}" for n, k in refs.items()))
     else:
         refs = {name: res.K for name, res in refs.items()}
-    print("stability: odd views vs even views (difference, px)")
-    for name, kwargs in METHODS.items():
-        try:
-            odd = calibrate(views[1::2], BOARD, **kwargs)
-            even = calibrate(views[0::2], BOARD, **kwargs)
-        except CalibrationError as exc:
-            print(f"  {name:18} refused: {exc}")
-            report["halves"][name] = str(exc)
-            continue
-        verdict = "" if odd.ok and even.ok else \
-            f"  (trusted: odd {'yes' if odd.ok else 'no'}, even {'yes' if even.ok else 'no'})"
-        diff = [odd.K[0, 0] - even.K[0, 0], odd.K[1, 1] - even.K[1, 1], odd.K[0, 2] - even.K[0, 2],
-                odd.K[1, 2] - even.K[1, 2]]
-        rel = [diff[0] / even.K[0, 0], diff[1] / even.K[1, 1]]
-        print(f"  {name:18} dfx {diff[0]:+7.2f} ({rel[0]:+.2%})  dfy {diff[1]:+7.2f} ({rel[1]:+.2%})  "
-              f"dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f}{verdict}")
-        report["halves"][name] = diff + rel
+    # stability: two disjoint halves of the views, interleaved and as recorded (the first half of
+    # the recording covers other image regions and distances than the second)
+    n = len(views)
+    for key, title, (a, b) in (("halves", "odd views vs even views", (views[1::2], views[0::2])),
+                               ("recording_halves", "second half of the recording vs first", (views[n // 2:],
+                                                                                               views[:n // 2]))):
+        print(f"stability: {title} (difference, px, and in standard deviations of the difference)")
+        report[key] = {name: halves_apart(a, b, kwargs, name) for name, kwargs in METHODS.items()}
     if draws:
         report["few_view"] = few_view(views, draws, jobs, refs)
     report["refs_K"] = {n: k.tolist() for n, k in refs.items()}
     return report
+
+
+def halves_apart(a: list[View], b: list[View], kwargs: dict, name: str) -> list[float] | str:
+    """fx, fy, cx, cy of ``a`` less ``b``'s, fx's and fy's relative, then each difference over the
+    standard deviation of the difference the two state."""
+    try:
+        ra, rb = calibrate(a, BOARD, **kwargs), calibrate(b, BOARD, **kwargs)
+    except CalibrationError as exc:
+        print(f"  {name:18} refused: {exc}")
+        return str(exc)
+    keys = ("fx", "fy", "cx", "cy")
+    diff = [ra.K[0, 0] - rb.K[0, 0], ra.K[1, 1] - rb.K[1, 1], ra.K[0, 2] - rb.K[0, 2], ra.K[1, 2] - rb.K[1, 2]]
+    rel = [diff[0] / rb.K[0, 0], diff[1] / rb.K[1, 1]]
+    sigmas = [d / np.hypot(ra.std[k], rb.std[k]) for d, k in zip(diff, keys)]
+    verdict = "" if ra.ok and rb.ok else f"  (trusted: {'yes' if ra.ok else 'no'}, {'yes' if rb.ok else 'no'})"
+    print(f"  {name:18} dfx {diff[0]:+7.2f} ({rel[0]:+.2%})  dfy {diff[1]:+7.2f} ({rel[1]:+.2%})  "
+          f"dcx {diff[2]:+7.2f}  dcy {diff[3]:+7.2f};  sigmas " + " ".join(f"{z:+.1f}" for z in sigmas) + verdict)
+    return diff + rel + sigmas
 
 
 def few_view(views: list[View], draws: int, jobs: int, refs: dict[str, np.ndarray]) -> list[dict]:
