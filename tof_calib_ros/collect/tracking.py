@@ -159,7 +159,8 @@ def _grid_leverage(cols: int, rows: int) -> float:
     """The largest leverage of a corner of a ``cols`` x ``rows`` grid in a homography's
     least-squares fit (of a square view; perspective changes it little): a corner displaced by
     e moves off that fit by at least (1 - leverage) e."""
-    x, y = (_grid(cols, rows) - _grid(cols, rows).mean(axis=0)).T
+    grid = _grid(cols, rows)
+    x, y = (grid - grid.mean(axis=0)).T
     one, zero = np.ones_like(x), np.zeros_like(x)
     J = np.empty((2 * len(x), 8))
     J[0::2] = np.column_stack([x, y, one, zero, zero, zero, -x * x, -x * y])
