@@ -155,3 +155,14 @@ def test_what_the_pixel_weights_choose_is_stated(seed):
             assert abs(off) > 5 * own and abs(off) < 3 * said, (off, own, said)
         else:
             assert said == own and abs(off) < 3 * own, (off, own, said)
+
+
+@pytest.mark.parametrize("n, folds", [(23, 10), (7, 10), (49, 10)])
+def test_runs_of_consecutive_views_leave_out_each_view_once(n, folds):
+    """The block jackknife's folds: each refit leaves out one run of views in their order, and the
+    runs together are every view once (the Kinect recording's halves, which every-5th-view folds
+    never separate, need both)."""
+    left_out = [np.setdiff1d(np.arange(n), kept) for kept in bundle.jackknife_folds(n, folds, consecutive=True)]
+    assert len(left_out) == min(n, folds)
+    assert np.array_equal(np.sort(np.concatenate(left_out)), np.arange(n))
+    assert all(np.all(np.diff(run) == 1) and 1 <= len(run) <= -(-n // folds) for run in left_out)

@@ -452,9 +452,13 @@ def _covariance(problem: Problem, state: State, n_views: int, free_poses: bool) 
     return global_covariance(_normal(J, r, n_views), free_poses) * max((r @ r) / dof, 1.0), float(r @ r)
 
 
-def jackknife_folds(n: int, folds: int) -> list[np.ndarray]:
-    """The views each of ``min(folds, n)`` refits keeps: fold k leaves out every m-th view from the k-th."""
+def jackknife_folds(n: int, folds: int, consecutive: bool = False) -> list[np.ndarray]:
+    """The views each of ``min(folds, n)`` refits keeps: fold k leaves out every m-th view from the
+    k-th, or, ``consecutive``, the k-th of m runs of views in their order (views taken one after
+    another share a region of the image and a distance, which every-m-th folds never leave out)."""
     m = min(folds, n)
+    if consecutive:
+        return [np.setdiff1d(np.arange(n), run) for run in np.array_split(np.arange(n), m)]
     return [np.setdiff1d(np.arange(n), np.arange(k, n, m)) for k in range(m)]
 
 
@@ -466,11 +470,11 @@ def jackknife_spread(estimates: np.ndarray) -> np.ndarray:
 
 
 def fold_estimates(views: list[Observations], fit: Fit, convention: str, folds: int, estimated,
-                   loss: str | None = None) -> np.ndarray | None:
+                   loss: str | None = None, consecutive: bool = False) -> np.ndarray | None:
     """Every global parameter (intrinsics, then bias; a row each) refitted from the fit's state
     without each of ``folds`` groups of the views, ``estimated`` free: how far an error of each
     view's own moves them. None with fewer than 3 folds."""
-    kept = jackknife_folds(len(views), folds)
+    kept = jackknife_folds(len(views), folds, consecutive)
     if len(kept) < 3:
         return None
     estimates = []
