@@ -57,7 +57,7 @@ OUTLIER_SIGMAS = 6.0  # with a robust loss, corners this far off are dropped and
 DEPTH_INFLATION_STEP = 2.0  # the depth's error is raised by this factor until the corners fit as well as alone
 MAX_DEPTH_INFLATION = 64.0  # and at most to this many times its noise: the depth is then all but silent
 # runs of consecutive views the stated uncertainty is jackknifed over: split in its recording's order,
-# the real Kinect v2 views' halves put cx 6.1 stated sigmas apart with every-5th-view folds, 3.7 with
+# the real Kinect v2 views' halves put cx 6.1 stated sigmas apart with every-5th-view folds, 3.8 with
 # 10 runs; 5 runs made a rougher jackknife (one simulated recording's cy 2.3 -> 3.6 sigmas off)
 RECORDING_RUNS = 10
 MIN_SIZED_VIEWS = 2  # one view's squares size (distance + offset) / focal length, which the offset and K share

@@ -108,9 +108,9 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
     ``calibrate``), atomically; returns the path.
 
     The report calibrates again (the other method on the same views; the first and the second
-    half of the views separately) with the options the result records and the model it chose. Raises ReportError
-    when the views do not match the result, and CalibrationFileError when the file cannot be
-    written.
+    half of the views separately) with the options the result records and the model it chose.
+    Raises ReportError when the views do not match the result, and CalibrationFileError when the
+    file cannot be written.
     """
     say = progress or (lambda _msg: None)
     data = _view_data(views, board, result, result.options.depth_units)
@@ -130,8 +130,7 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
         ("planarization", "Depth planarization of one view", _section_planarization(data, result, board)),
         ("comparison", "Traditional vs depth-aided", _section_comparison(result, comparison)),
         ("cross-validation", "Cross-validation: the first half of the views against the second",
-         _section_cross_validation(
-            result, comparison)),
+         _section_cross_validation(result, comparison)),
     ]
     page = _page(title or f"ToF calibration report ({result.image_size[0]}x{result.image_size[1]})", sections)
     out = atomic_write(path, page.encode("utf-8"))
