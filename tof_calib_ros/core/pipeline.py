@@ -357,6 +357,22 @@ def _reweighted(observations: list[bundle.Observations], fit: bundle.Fit, stated
                     + ", ".join(f"{name} ±{after[name]:.2f}" for name in grown) + " px)")
 
 
+def _over_runs(stated: bundle.Fit, runs: np.ndarray | None, free) -> tuple[bundle.Fit, str | None]:
+    """``stated`` jackknifed over the runs of consecutive views (``runs``: their refits'
+    estimates), and which of the camera's four terms that raised, and why (None where none grew
+    much): a stated sigma several times the noise's would otherwise be unexplained."""
+    raised = bundle.jackknifed(stated, runs, free)
+    before, after = stated.std(), raised.std()
+    grown = [name for name in ("fx", "fy", "cx", "cy") if after[name] > 1.1 * before[name]]
+    if not grown:
+        return raised, None
+    return raised, (f"refitted without each of {len(runs)} runs of views taken one after another, "
+                    + ", ".join(f"{name} spreads ±{after[name]:.2f} px where the fit states ±{before[name]:.2f}"
+                                for name in grown)
+                    + ": the runs cover parts of the image and distances whose results differ more than their noise "
+                    "says; the uncertainty includes that spread")
+
+
 def _calibrate(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
     convention = options.depth_convention
@@ -484,7 +500,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         say(averaged)
     noise_fit = fit
     runs = bundle.fold_estimates(observations, fit, convention, RECORDING_RUNS, free, options.loss, consecutive=True)
-    stated = bundle.jackknifed(stated, runs, free)
+    stated, spread = _over_runs(stated, runs, free)
+    if spread is not None:
+        model.reasons.append(spread)
+        say(spread)
     stated, weighted = _reweighted(observations, noise_fit, stated, options)
     if weighted is not None:
         model.reasons.append(weighted)
