@@ -478,11 +478,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
                 prepared, plane_samples, obj, lighter, start, check.scale, options, say, radial=radial)
             model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
             reason, estimates = why_yield(observations, fit, free, model, options, corners)
-        if estimates is None:   # the folds of the last fit, whose estimate the widening leaves as it was
-            estimates = bundle.fold_estimates(observations, fit, convention, CORNER_FOLDS, free, options.loss)
         stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle, corner_fit)
-        worse = None if refuted or corners is None or not unexplained \
-            else less_certain(stated, estimates, free, corners)
+        worse = None
+        if not refuted and corners is not None and unexplained:
+            if estimates is None:   # the folds of the last fit, whose estimate the widening leaves as it was
+                estimates = bundle.fold_estimates(observations, fit, convention, CORNER_FOLDS, free, options.loss)
+            worse = less_certain(stated, estimates, free, corners)
         if worse is None or inflation >= MAX_DEPTH_INFLATION:
             break
         reason = (f"the depth at its full weight, with what its model leaves open, left {worse[0]} less certain "
