@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
+from tof_calib_ros.core.projection_diff import projection_difference
 from tof_calib_ros.offline.report import ReportError, write_report
 
 BOARD = Board(8, 6, 0.04)
@@ -174,6 +175,30 @@ def test_traditional_and_cross_validation_match_independent_calibrations(report)
         assert _shows(got[6], abs(e - o) / sigma)
         assert got[7] == ("consistent" if abs(e - o) <= 3 * sigma else "inconsistent")
     assert "parameters agree within 3 predicted standard deviations" in page.sections["cross-validation"]
+
+    # where over the image the halves project apart, where both saw the board and elsewhere
+    text = page.sections["cross-validation"]
+    angle, median, most = map(float, re.search(r"frame of ([\d.]+)°.*a median of ([\d.]+) px, ([\d.]+) px at most",
+                                               text).groups())
+    elsewhere = float(re.search(r"at most one of them looked, by up to ([\d.]+) px", text).group(1))
+    cells = np.linspace(-0.5, CAM.width - 0.5, 9), np.linspace(-0.5, CAM.height - 0.5, 9)
+    halves = used[:len(used) // 2], used[len(used) // 2:]
+    corners = [np.concatenate([views[i].corners for i in half]) for half in halves]
+    both = np.logical_and(*[np.histogram2d(*c.T, bins=cells)[0] > 0 for c in corners])
+
+    def in_both(px):
+        i, j = (np.clip(np.digitize(px[:, k], cells[k]) - 1, 0, 7) for k in (0, 1))
+        return both[i, j]
+
+    seen = np.concatenate(corners)
+    pd = projection_difference(np.r_[first.K[[0, 1, 0, 1], [0, 1, 2, 2]], first.D.ravel()],
+                               np.r_[second.K[[0, 1, 0, 1], [0, 1, 2, 2]], second.D.ravel()], CAM.size,
+                               seen[in_both(seen)])
+    shared = in_both(np.stack(np.meshgrid(pd.xs, pd.ys), -1).reshape(-1, 2)).reshape(pd.diff.shape)
+    assert 0 < shared.sum() < shared.size
+    assert _shows(f"{angle:.2f}", pd.angle_deg)
+    assert _shows(f"{median:.2f}", np.median(pd.diff[shared])) and _shows(f"{most:.2f}", pd.diff[shared].max())
+    assert _shows(f"{elsewhere:.2f}", np.nanmax(pd.diff[~shared]))
 
 
 def test_the_banner_agrees_with_the_cross_validation(report):

@@ -145,6 +145,14 @@ def fold_distance(params: np.ndarray, image_size: tuple[int, int], directions: i
     return float(np.min(np.hypot(u[rows, first] - cx, v[rows, first] - cy)))
 
 
+def unfolded(xy: np.ndarray, params: np.ndarray, steps: int = 64) -> np.ndarray:
+    """Whether the lens model is one-to-one from the axis out to each normalised point (N,2): past
+    a fold, a ray projects onto pixels whose own rays are others, and the model says nothing true."""
+    t = np.linspace(0.0, 1.0, steps + 1)[1:, None]
+    _, _, dxy, _ = _distort(t * xy[:, 0], t * xy[:, 1], np.asarray(params[4:9], dtype=float), True)
+    return np.all(dxy[..., 0, 0] * dxy[..., 1, 1] - dxy[..., 0, 1] * dxy[..., 1, 0] > 0, axis=0)
+
+
 def rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
     """Viewing rays (N,3) with z = 1 through distorted pixels."""
     xy = undistort_normalized(pixels, params)

@@ -6,7 +6,8 @@ So the page shows the parameters with their standard deviations, the residuals o
 and over distance, each view's share, the coverage, the board poses, the planarization of one
 view, the traditional calibration of the same views, and a cross-validation: the first and the
 second half of the views, in the order given, calibrated separately, their difference set against
-the standard deviation the fits predict for it (mrcal's honesty check). Halves in the recording's
+the standard deviation the fits predict for it (mrcal's honesty check), and where over the image
+the two project apart (mrcal's projection_diff). Halves in the recording's
 order, not alternate views: a person sweeps the board across the image, so the halves of a
 recording can cover different parts of it, which alternate views, each half holding views from
 all of it, never show (the real Kinect v2 recording's halves: ours' cx 3.8 stated sigmas apart,
@@ -40,6 +41,7 @@ from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 from ..core.pipeline import calibrate
 from ..core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
+from ..core.projection_diff import projection_difference
 from ..core.result import INTRINSIC_NAMES, CalibrationResult
 from ..files.calibration_file import atomic_write
 
@@ -130,7 +132,7 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
         ("planarization", "Depth planarization of one view", _section_planarization(data, result, board)),
         ("comparison", "Traditional vs depth-aided", _section_comparison(result, comparison)),
         ("cross-validation", "Cross-validation: the first half of the views against the second",
-         _section_cross_validation(result, comparison)),
+         _section_cross_validation(result, comparison, data)),
     ]
     page = _page(title or f"ToF calibration report ({result.image_size[0]}x{result.image_size[1]})", sections)
     out = atomic_write(path, page.encode("utf-8"))
@@ -461,8 +463,7 @@ def _section_per_view(data: list[_ViewData], result: CalibrationResult) -> str:
 def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
     w, h = result.image_size
     colours = _colours(len(data))
-    pts = np.concatenate([d.measured for d in data])
-    counts, _, _ = np.histogram2d(pts[:, 0], pts[:, 1], bins=COVERAGE_CELLS, range=[[-0.5, w - 0.5], [-0.5, h - 0.5]])
+    counts = _cell_counts(np.concatenate([d.measured for d in data]), result.image_size)
     covered = int((counts > 0).sum())
     fig = _new_figure(11, 4.6)
     a, b = fig.subplots(1, 2, width_ratios=[1.2, 1])
@@ -490,6 +491,18 @@ def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
             "depth offset.")
     return (f"<p>{_e(text)}</p>" + _figure(fig, "coverage", "Left: every detected corner, coloured by view, over "
             "the image. Right: each view's corner distances, from the nearest corner to the farthest."))
+
+
+def _cell_of(x: np.ndarray, length: int) -> np.ndarray:
+    """Which of COVERAGE_CELLS equal cells along an image side of ``length`` px each coordinate is in."""
+    return np.clip(((x + 0.5) * COVERAGE_CELLS / length).astype(int), 0, COVERAGE_CELLS - 1)
+
+
+def _cell_counts(pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(COVERAGE_CELLS, COVERAGE_CELLS) how many of ``pixels`` (N, 2) fall in each cell, by x then y."""
+    counts = np.zeros((COVERAGE_CELLS, COVERAGE_CELLS), dtype=int)
+    np.add.at(counts, (_cell_of(pixels[:, 0], image_size[0]), _cell_of(pixels[:, 1], image_size[1])), 1)
+    return counts
 
 
 def _board_outline(board: Board, per_edge: int = 1) -> np.ndarray:
@@ -673,7 +686,7 @@ def _same_lens(depth: CalibrationResult, same: CalibrationResult | str | None) -
             "trades with the lens terms, so part of its difference from the table's is the lens model's.</p>")
 
 
-def _section_cross_validation(result: CalibrationResult, comparison: _Comparison) -> str:
+def _section_cross_validation(result: CalibrationResult, comparison: _Comparison, data: list[_ViewData]) -> str:
     if comparison.halves is None:
         return f'<p class="note">Cross-validation {_e(comparison.skipped)}.</p>'
     first, second = comparison.halves
@@ -714,4 +727,53 @@ def _section_cross_validation(result: CalibrationResult, comparison: _Comparison
                                           "difference (first − second)", "predicted std of the difference", "ratio",
                                           "verdict"], rows, classes)
             + _figure(fig, "cross-validation ratios", f"The difference of each parameter between the halves over "
-                      f"its predicted standard deviation; the dashed line is {CONSISTENT_SIGMAS:g}."))
+                      f"its predicted standard deviation; the dashed line is {CONSISTENT_SIGMAS:g}.")
+            + _halves_projection(first, second, data, comparison.half_views, result))
+
+
+def _halves_projection(first: CalibrationResult, second: CalibrationResult, data: list[_ViewData],
+                       half_views: tuple[list[int], list[int]], result: CalibrationResult) -> str:
+    """Where over the image the halves project apart: the table says by how much each parameter
+    differs, not whether that matters where the board was, or only where no view reached."""
+    w, h = result.image_size
+    corners = [np.concatenate([d.measured for d in data if d.index in idx]) for idx in half_views]
+    both = np.logical_and(*[_cell_counts(c, result.image_size) > 0 for c in corners])
+
+    def in_both(px: np.ndarray) -> np.ndarray:
+        return both[_cell_of(px[:, 0], w), _cell_of(px[:, 1], h)]
+
+    seen = np.concatenate(corners)
+    seen = seen[in_both(seen)] if both.any() else seen
+    pd = projection_difference(pack_intrinsics(first.K, first.D), pack_intrinsics(second.K, second.D),
+                               result.image_size, seen)
+    grid = np.stack(np.meshgrid(pd.xs, pd.ys), axis=-1).reshape(-1, 2)
+    shared = in_both(grid).reshape(pd.diff.shape)
+    looked = pd.diff[shared & np.isfinite(pd.diff)]
+    elsewhere = pd.diff[~shared & np.isfinite(pd.diff)]
+    text = (f"Each pixel's ray through the first half's calibration, projected through the second's, after a "
+            f"rotation of the camera frame of {pd.angle_deg:.2f}° that the board poses take up (mrcal's "
+            "projection_diff): what a user of either would see differ, and where. ")
+    if looked.size:
+        text += (f"Where both halves saw the board ({int(both.sum())} of {COVERAGE_CELLS ** 2} cells) they differ by "
+                 f"a median of {np.median(looked):.2f} px, {looked.max():.2f} px at most")
+    else:
+        text += "No cell of the image holds corners of both halves"
+    text += (f"; where at most one of them looked, by up to {elsewhere.max():.2f} px. " if elsewhere.size else ". ")
+    text += (f"Against the corners' fit ({result.pixel_rms:.2f} px RMS): a difference far beyond it where both "
+             "looked means the halves disagree on the lens itself; one that grows only where one looked means the "
+             "views did not reach there, which the standard deviations above cannot show. Add views there.")
+    fig = _new_figure(8.0, 6.4 * h / w + 0.8)   # the colour bar takes a fifth of the width
+    ax = fig.subplots()
+    top = np.nanpercentile(pd.diff, 99) if np.isfinite(pd.diff).any() else 1.0
+    mesh = ax.pcolormesh(pd.xs, pd.ys, pd.diff, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
+    fig.colorbar(mesh, ax=ax, label="projection difference (px)")
+    ax.contour(pd.xs, pd.ys, shared.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    for c, marker, label in zip(corners, ("o", "x"), ("first half", "second half")):
+        ax.scatter(c[:, 0], c[:, 1], s=4, marker=marker, color="w" if marker == "o" else "0.6", linewidths=0.6,
+                   label=label)
+    ax.legend(loc="lower right", fontsize=8, markerscale=3, facecolor="0.35", labelcolor="w")
+    ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
+           title="first vs second half: projection difference")
+    return f"<p>{_e(text)}</p>" + _figure(fig, "projection difference of the halves", (
+        "The halves' projection difference over the image (px; colour scale to its 99th percentile). Cyan outlines "
+        "the cells where both halves saw the board; the dots are the halves' corners."))
