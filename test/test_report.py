@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
-from tof_calib_ros.core.projection_diff import projection_difference
+from tof_calib_ros.core.projection_diff import projection_difference, projection_spread
 from tof_calib_ros.offline.report import ReportError, write_report
 
 BOARD = Board(8, 6, 0.04)
@@ -199,6 +199,22 @@ def test_traditional_and_cross_validation_match_independent_calibrations(report)
     assert _shows(f"{angle:.2f}", pd.angle_deg)
     assert _shows(f"{median:.2f}", np.median(pd.diff[shared])) and _shows(f"{most:.2f}", pd.diff[shared].max())
     assert _shows(f"{elsewhere:.2f}", np.nanmax(pd.diff[~shared]))
+
+
+def test_the_coverage_maps_how_well_each_pixel_s_projection_is_known(report):
+    views, result, path, _ = report
+    text = _Page(path.read_text("utf-8")).sections["coverage"]
+    median, most = map(float, re.search(r"known to a median of ([\d.]+) px \(([\d.]+) at most\)", text).groups())
+    corners = np.concatenate([views[v.index].corners for v in result.views])
+    xs, ys, spread = projection_spread(np.r_[result.K[[0, 1, 0, 1], [0, 1, 2, 2]], result.D.ravel()],
+                                       result.run_intrinsics, CAM.size, corners)
+    assert result.run_intrinsics.shape == (10, 9)
+    cells = np.zeros((8, 8), bool)
+    cells[((corners[:, 0] + 0.5) // 25).astype(int), ((corners[:, 1] + 0.5) // 25).astype(int)] = True
+    gx, gy = np.meshgrid(xs, ys)
+    reached = spread[cells[((gx + 0.5) // 25).astype(int), ((gy + 0.5) // 25).astype(int)]]
+    assert _shows(f"{median:.2f}", np.median(reached)) and _shows(f"{most:.2f}", reached.max())
+    assert 0 < median < 0.5   # 12 views of a mild lens over most of the image
 
 
 def test_the_banner_agrees_with_the_cross_validation(report):

@@ -130,9 +130,10 @@ def _corner_fit(obj: list[np.ndarray], views: list[Prepared], trad: Traditional,
 
 def _result(options: CalibrationOptions, model: Model, board: Board, image_size, fit, views, planes, rejected,
             notes, corner_fit: bundle.Fit | None = None, noise_fit: bundle.Fit | None = None,
-            depth_focal: Focal | None = None) -> CalibrationResult:
+            depth_focal: Focal | None = None, runs: np.ndarray | None = None) -> CalibrationResult:
     """``noise_fit``: the fit with the covariance its noise gives, where ``fit``'s was raised (by the
-    fits of other depth models, by the views' jackknife). ``depth_focal``: see CalibrationResult."""
+    fits of other depth models, by the views' jackknife). ``depth_focal``: see CalibrationResult.
+    ``runs``: the global parameters refitted without each run of views (``bundle.fold_estimates``)."""
     K, D = split_intrinsics(fit.state.intrinsics)
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
@@ -143,7 +144,7 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
     return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
                              fit.std(), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
                              board.square, corner_noise=corner_noise, noise_std=(noise_fit or fit).std(),
-                             depth_focal=depth_focal)
+                             depth_focal=depth_focal, run_intrinsics=None if runs is None else runs[:, :N_INTRINSICS])
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
@@ -513,7 +514,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
     result = _result(asked, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
-                     noise_fit, depth_focal)
+                     noise_fit, depth_focal, runs)
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
             corner_fit.state.intrinsics, [v.corners for v in prepared], full_depths, obj, convention)

@@ -25,8 +25,13 @@ ROUND_TRIP_PX = 0.01
 class ProjectionDiff(NamedTuple):
     xs: np.ndarray         # (W',) pixel columns of the grid
     ys: np.ndarray         # (H',) pixel rows
-    diff: np.ndarray       # (H', W') px, NaN where either model has no ray
+    shift: np.ndarray      # (H', W', 2) px, b's pixel less a's; NaN where either model has no ray
     rotation: np.ndarray   # (3, 3) the camera frame's rotation from ``a``'s to ``b``'s
+
+    @property
+    def diff(self) -> np.ndarray:
+        """(H', W') px, how far apart."""
+        return np.hypot(self.shift[..., 0], self.shift[..., 1])
 
     @property
     def angle_deg(self) -> float:
@@ -68,10 +73,24 @@ def projection_difference(a: np.ndarray, b: np.ndarray, image_size: tuple[int, i
     va = _unit_rays(grid, a)
     ok = np.isfinite(va).all(axis=1)
     moved = va[ok] @ R.T
-    diff = np.full(len(grid), np.nan)
+    shift = np.full((len(grid), 2), np.nan)
     # a ray behind b's camera, or past where b's lens model folds, has no pixel in b
     seen_by_b = moved[:, 2] > 0
     seen_by_b[seen_by_b] = unfolded(moved[seen_by_b, :2] / moved[seen_by_b, 2:], b)
     idx = np.flatnonzero(ok)[seen_by_b]
-    diff[idx] = np.hypot(*(project(moved[seen_by_b], b).pixels - grid[idx]).T)
-    return ProjectionDiff(xs, ys, diff.reshape(len(ys), len(xs)), R)
+    shift[idx] = project(moved[seen_by_b], b).pixels - grid[idx]
+    return ProjectionDiff(xs, ys, shift.reshape(len(ys), len(xs), 2), R)
+
+
+def projection_spread(center: np.ndarray, refits: np.ndarray, image_size: tuple[int, int], seen: np.ndarray,
+                      step: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How well each pixel's projection is known (px; xs, ys and the (H', W') map): the grouped
+    jackknife's spread of where the ``refits`` (intrinsics without each group of views, a row
+    each) project the rays ``center`` gives, each aligned as in ``projection_difference``. Where
+    no view reached, each refit extrapolates its lens terms its own way: what a parameter's
+    standard deviation cannot show."""
+    pds = [projection_difference(center, r, image_size, seen, step) for r in refits]
+    shifts = np.array([p.shift for p in pds])
+    m = len(shifts)
+    spread = np.sqrt((m - 1) / m * np.sum((shifts - shifts.mean(axis=0)) ** 2, axis=(0, 3)))
+    return pds[0].xs, pds[0].ys, spread

@@ -109,6 +109,9 @@ class CalibrationResult:
     # fx, fy and what their noise gives them with the depth at its full weight: the focal length the
     # depth says, where it pulled the corners off their fit and the result leans on the corners
     depth_focal: Focal | None = None
+    # (R, 9) the intrinsics refitted without each of R runs of consecutive views, the jackknife
+    # behind the stated sigmas: how well each pixel's projection is known (core.projection_diff)
+    run_intrinsics: np.ndarray | None = None
 
     @property
     def depth_offset(self) -> float:
@@ -215,6 +218,7 @@ class CalibrationResult:
                 ("px", "dof"), self.corner_noise)),
             "depth_full_weight_focal": None if self.depth_focal is None else dict(zip(
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.depth_focal))),
+            "intrinsics_without_each_run": None if self.run_intrinsics is None else self.run_intrinsics.tolist(),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
             "rejected_views": {str(k): v for k, v in self.rejected.items()},

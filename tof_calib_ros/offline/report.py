@@ -41,7 +41,7 @@ from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 from ..core.pipeline import calibrate
 from ..core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
-from ..core.projection_diff import projection_difference
+from ..core.projection_diff import projection_difference, projection_spread
 from ..core.result import INTRINSIC_NAMES, CalibrationResult
 from ..files.calibration_file import atomic_write
 
@@ -490,7 +490,45 @@ def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
             "image edges constrain the distortion; a wide range of distances separates the focal length from the "
             "depth offset.")
     return (f"<p>{_e(text)}</p>" + _figure(fig, "coverage", "Left: every detected corner, coloured by view, over "
-            "the image. Right: each view's corner distances, from the nearest corner to the farthest."))
+            "the image. Right: each view's corner distances, from the nearest corner to the farthest.")
+            + _projection_spread(data, result, counts > 0))
+
+
+def _projection_spread(data: list[_ViewData], result: CalibrationResult, reached: np.ndarray) -> str:
+    """How well the calibration knows each pixel's ray: its stated sigmas are the runs' spread in
+    each parameter, which cannot say where over the image the runs part (mrcal's uncertainty map)."""
+    if result.run_intrinsics is None:
+        return ('<p class="note">No map of the projection\'s uncertainty: this calibration was not refitted '
+                "without each run of views (the traditional method, or too few views).</p>")
+    w, h = result.image_size
+    corners = np.concatenate([d.measured for d in data])
+    xs, ys, spread = projection_spread(pack_intrinsics(result.K, result.D), result.run_intrinsics, result.image_size,
+                                       corners)
+    gx, gy = np.meshgrid(xs, ys)
+    inside = reached[_cell_of(gx, w), _cell_of(gy, h)]
+    known, beyond = spread[inside & np.isfinite(spread)], spread[~inside & np.isfinite(spread)]
+    runs = len(result.run_intrinsics)
+    text = (f"How far each pixel's projection moves when the calibration is refitted without each of its {runs} runs "
+            "of consecutive views (the grouped jackknife behind the stated standard deviations, taken per pixel; "
+            "each refit's frame aligned as in the cross-validation's map). ")
+    if known.size:
+        text += f"Where the views reached, the projection is known to a median of {np.median(known):.2f} px " \
+                f"({known.max():.2f} at most)"
+    if beyond.size:
+        text += f"; beyond them, where the lens terms are extrapolated, to {beyond.max():.2f} px at worst"
+    text += f". A jackknife over {runs} runs is rough: read it as a scale, not a bound."
+    fig = _new_figure(8.0, 6.4 * h / w + 0.8)
+    ax = fig.subplots()
+    top = np.nanpercentile(spread, 99) if np.isfinite(spread).any() else 1.0
+    mesh = ax.pcolormesh(xs, ys, spread, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
+    fig.colorbar(mesh, ax=ax, label="projection uncertainty (px)")
+    ax.contour(xs, ys, inside.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    ax.scatter(corners[:, 0], corners[:, 1], s=3, color="w", linewidths=0)
+    ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
+           title="how well each pixel's projection is known")
+    return f"<p>{_e(text)}</p>" + _figure(fig, "projection uncertainty", (
+        "The spread of each pixel's projection over the refits without each run of views (px; colour scale to its "
+        "99th percentile). Cyan outlines the cells the views reached; the dots are the corners."))
 
 
 def _cell_of(x: np.ndarray, length: int) -> np.ndarray:
