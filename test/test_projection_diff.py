@@ -25,6 +25,13 @@ def _pixels(pd) -> np.ndarray:
     return np.stack(np.meshgrid(pd.xs, pd.ys), axis=-1)
 
 
+def _at(pd, pixels: np.ndarray) -> np.ndarray:
+    """The difference at the grid points nearest ``pixels`` (N, 2)."""
+    i = np.abs(pd.ys[None, :] - pixels[:, 1:2]).argmin(axis=1)
+    j = np.abs(pd.xs[None, :] - pixels[:, 0:1]).argmin(axis=1)
+    return pd.diff[i, j]
+
+
 def test_one_calibration_against_itself_differs_nowhere():
     pd = projection_difference(LENS, LENS, SIZE, _grid(100, 400, 80, 340))
     assert np.isfinite(pd.diff).all()
@@ -46,12 +53,12 @@ def test_a_principal_point_shift_is_mostly_a_rotation_of_the_frame():
     pd = projection_difference(PINHOLE, shifted, SIZE, seen)
     about_y = Rotation.from_rotvec([0.0, -np.arctan(6.0 / 370.0), 0.0]).as_matrix()
     np.testing.assert_allclose(pd.rotation, about_y, atol=1e-4)
-    assert np.max(pd.at(seen)) < 0.01 * 6.0
+    assert np.max(_at(pd, seen)) < 0.01 * 6.0
     # away from where it was fitted, rotation and shift part: at the image's corner, by hand
     corner = np.array([3.5, 3.5])
     ray = about_y @ np.r_[(corner - PINHOLE[2:4]) / PINHOLE[:2], 1.0]
     there = PINHOLE[:2] * ray[:2] / ray[2] + shifted[2:4]
-    assert pd.at(corner[None])[0] == pytest.approx(np.hypot(*(there - corner)), rel=0.02)
+    assert _at(pd, corner[None])[0] == pytest.approx(np.hypot(*(there - corner)), rel=0.02)
     assert np.hypot(*(there - corner)) > 1.0
 
 

@@ -37,12 +37,6 @@ class ProjectionDiff(NamedTuple):
     def angle_deg(self) -> float:
         return float(np.degrees(Rotation.from_matrix(self.rotation).magnitude()))
 
-    def at(self, pixels: np.ndarray) -> np.ndarray:
-        """The difference at the grid points nearest ``pixels`` (N, 2)."""
-        i = np.abs(self.ys[None, :] - pixels[:, 1:2]).argmin(axis=1)
-        j = np.abs(self.xs[None, :] - pixels[:, 0:1]).argmin(axis=1)
-        return self.diff[i, j]
-
 
 def _unit_rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
     """Unit rays through ``pixels``, NaN where the lens model folds before them (no ray of their own)."""
