@@ -23,6 +23,7 @@ from . import bundle
 from . import depth_bias as bias_model
 from .board import Board
 from .camera import N_INTRINSICS, split_intrinsics, transform_views
+from .coverage import reach
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, square_from_depth, update_intrinsics
 from .depth_trust import CORNER_FOLDS, CornersAlone, DepthCheck, bowl_check, depth_check, less_certain, why_yield
 from .detection import detect
@@ -513,6 +514,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
+    if runs is not None:
+        extrapolated = reach(stated.state.intrinsics, runs[:, :N_INTRINSICS],
+                             np.concatenate([v.corners for v in prepared]), image_size).note()
+        if extrapolated is not None:
+            notes.append(extrapolated)
+            say(extrapolated)
     result = _result(asked, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
                      noise_fit, depth_focal, runs)
     if corner_fit is not None:

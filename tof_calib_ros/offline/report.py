@@ -37,18 +37,18 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from ..core import depth_bias as bias_model
 from ..core.board import Board
 from ..core.camera import depth_of, pack_intrinsics, project, transform
+from ..core.coverage import CELLS, cell_counts, cell_of, reach
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 from ..core.pipeline import calibrate
 from ..core.planarize import board_samples, corner_depth_along, directions, fit_plane_to, fit_samples, sample_depth
-from ..core.projection_diff import projection_difference, projection_spread
+from ..core.projection_diff import projection_difference
 from ..core.result import INTRINSIC_NAMES, CalibrationResult
 from ..files.calibration_file import atomic_write
 
 MIN_CV_VIEWS = 6            # three a half: the fewest a calibration accepts
 CONSISTENT_SIGMAS = 3.0     # a half-sample difference within this many predicted sigmas is consistent
 WORST_SHOWN = 3
-COVERAGE_CELLS = 8          # the image is split COVERAGE_CELLS x COVERAGE_CELLS for the coverage count
 DPI = 80
 
 PARAMS = INTRINSIC_NAMES + bias_model.NAMES
@@ -368,9 +368,7 @@ def _section_residuals(data: list[_ViewData], result: CalibrationResult) -> str:
     b.quiver(pts[:, 0], pts[:, 1], res[:, 0] * scale, res[:, 1] * scale, color=point_colours, angles="xy",
              scale_units="xy", scale=1, width=0.0025)
     # The mean residual per image cell: a pattern there is a model error, not noise.
-    cx = np.clip((pts[:, 0] / w * COVERAGE_CELLS).astype(int), 0, COVERAGE_CELLS - 1)
-    cy = np.clip((pts[:, 1] / h * COVERAGE_CELLS).astype(int), 0, COVERAGE_CELLS - 1)
-    cell = cy * COVERAGE_CELLS + cx
+    cell = cell_of(pts[:, 1], h) * CELLS + cell_of(pts[:, 0], w)
     for c in np.unique(cell):
         sel = cell == c
         if sel.sum() >= 3:
@@ -380,7 +378,7 @@ def _section_residuals(data: list[_ViewData], result: CalibrationResult) -> str:
           title=f"residual vectors over the image, x{scale:g}")
     caption = (f"Left: every corner's residual (predicted minus detected), coloured by view. Right: the same "
                f"residuals drawn at their corners, magnified {scale:g} times, and in red the mean residual of each "
-               f"of the {COVERAGE_CELLS}x{COVERAGE_CELLS} image cells with 3 corners or more (same scale): "
+               f"of the {CELLS}x{CELLS} image cells with 3 corners or more (same scale): "
                "a pattern there, rather than noise, means the lens model does not fit.")
     return _figure(fig, "pixel residuals", caption) + _depth_residual_figure(data, result)
 
@@ -463,7 +461,7 @@ def _section_per_view(data: list[_ViewData], result: CalibrationResult) -> str:
 def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
     w, h = result.image_size
     colours = _colours(len(data))
-    counts = _cell_counts(np.concatenate([d.measured for d in data]), result.image_size)
+    counts = cell_counts(np.concatenate([d.measured for d in data]), result.image_size)
     covered = int((counts > 0).sum())
     fig = _new_figure(11, 4.6)
     a, b = fig.subplots(1, 2, width_ratios=[1.2, 1])
@@ -471,11 +469,11 @@ def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
              interpolation="nearest")
     for c, d in zip(colours, data):
         a.scatter(d.measured[:, 0], d.measured[:, 1], s=5, color=c, linewidths=0)
-    for k in range(1, COVERAGE_CELLS):
-        a.axvline(-0.5 + k * w / COVERAGE_CELLS, color="0.8", lw=0.5)
-        a.axhline(-0.5 + k * h / COVERAGE_CELLS, color="0.8", lw=0.5)
+    for k in range(1, CELLS):
+        a.axvline(-0.5 + k * w / CELLS, color="0.8", lw=0.5)
+        a.axhline(-0.5 + k * h / CELLS, color="0.8", lw=0.5)
     a.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
-          title=f"corners over the image: {covered} of {COVERAGE_CELLS ** 2} cells (empty cells red)")
+          title=f"corners over the image: {covered} of {CELLS ** 2} cells (empty cells red)")
     order = np.argsort([np.median(d.distance) for d in data])
     for row, k in enumerate(order):
         d = data[k]
@@ -485,16 +483,16 @@ def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
     near = min(d.distance.min() for d in data)
     far = max(d.distance.max() for d in data)
     tilts = [d.tilt_deg for d in data]
-    text = (f"The corners fall in {covered} of the {COVERAGE_CELLS}x{COVERAGE_CELLS} image cells; the views span "
+    text = (f"The corners fall in {covered} of the {CELLS}x{CELLS} image cells; the views span "
             f"{near:.3f} to {far:.3f} m and tilts of {min(tilts):.0f} to {max(tilts):.0f} degrees. Corners near the "
             "image edges constrain the distortion; a wide range of distances separates the focal length from the "
             "depth offset.")
     return (f"<p>{_e(text)}</p>" + _figure(fig, "coverage", "Left: every detected corner, coloured by view, over "
             "the image. Right: each view's corner distances, from the nearest corner to the farthest.")
-            + _projection_spread(data, result, counts > 0))
+            + _projection_spread(data, result))
 
 
-def _projection_spread(data: list[_ViewData], result: CalibrationResult, reached: np.ndarray) -> str:
+def _projection_spread(data: list[_ViewData], result: CalibrationResult) -> str:
     """How well the calibration knows each pixel's ray: its stated sigmas are the runs' spread in
     each parameter, which cannot say where over the image the runs part (mrcal's uncertainty map)."""
     if result.run_intrinsics is None:
@@ -502,45 +500,30 @@ def _projection_spread(data: list[_ViewData], result: CalibrationResult, reached
                 "without each run of views (the traditional method, or too few views).</p>")
     w, h = result.image_size
     corners = np.concatenate([d.measured for d in data])
-    xs, ys, spread = projection_spread(pack_intrinsics(result.K, result.D), result.run_intrinsics, result.image_size,
-                                       corners)
-    gx, gy = np.meshgrid(xs, ys)
-    inside = reached[_cell_of(gx, w), _cell_of(gy, h)]
-    known, beyond = spread[inside & np.isfinite(spread)], spread[~inside & np.isfinite(spread)]
+    known = reach(pack_intrinsics(result.K, result.D), result.run_intrinsics, corners, result.image_size)
+    xs, ys, spread = known.xs, known.ys, known.spread
     runs = len(result.run_intrinsics)
     text = (f"How far each pixel's projection moves when the calibration is refitted without each of its {runs} runs "
             "of consecutive views (the grouped jackknife behind the stated standard deviations, taken per pixel; "
             "each refit's frame aligned as in the cross-validation's map). ")
-    if known.size:
-        text += f"Where the views reached, the projection is known to a median of {np.median(known):.2f} px " \
-                f"({known.max():.2f} at most)"
-    if beyond.size:
-        text += f"; beyond them, where the lens terms are extrapolated, to {beyond.max():.2f} px at worst"
+    if known.known.size:
+        text += f"Where the views reached, the projection is known to a median of {np.median(known.known):.2f} px " \
+                f"({known.known.max():.2f} at most)"
+    if known.beyond.size:
+        text += f"; beyond them, where the lens terms are extrapolated, to {known.beyond.max():.2f} px at worst"
     text += f". A jackknife over {runs} runs is rough: read it as a scale, not a bound."
     fig = _new_figure(8.0, 6.4 * h / w + 0.8)
     ax = fig.subplots()
     top = np.nanpercentile(spread, 99) if np.isfinite(spread).any() else 1.0
     mesh = ax.pcolormesh(xs, ys, spread, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
     fig.colorbar(mesh, ax=ax, label="projection uncertainty (px)")
-    ax.contour(xs, ys, inside.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    ax.contour(xs, ys, known.inside.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
     ax.scatter(corners[:, 0], corners[:, 1], s=3, color="w", linewidths=0)
     ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
            title="how well each pixel's projection is known")
     return f"<p>{_e(text)}</p>" + _figure(fig, "projection uncertainty", (
         "The spread of each pixel's projection over the refits without each run of views (px; colour scale to its "
         "99th percentile). Cyan outlines the cells the views reached; the dots are the corners."))
-
-
-def _cell_of(x: np.ndarray, length: int) -> np.ndarray:
-    """Which of COVERAGE_CELLS equal cells along an image side of ``length`` px each coordinate is in."""
-    return np.clip(((x + 0.5) * COVERAGE_CELLS / length).astype(int), 0, COVERAGE_CELLS - 1)
-
-
-def _cell_counts(pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
-    """(COVERAGE_CELLS, COVERAGE_CELLS) how many of ``pixels`` (N, 2) fall in each cell, by x then y."""
-    counts = np.zeros((COVERAGE_CELLS, COVERAGE_CELLS), dtype=int)
-    np.add.at(counts, (_cell_of(pixels[:, 0], image_size[0]), _cell_of(pixels[:, 1], image_size[1])), 1)
-    return counts
 
 
 def _board_outline(board: Board, per_edge: int = 1) -> np.ndarray:
@@ -775,10 +758,10 @@ def _halves_projection(first: CalibrationResult, second: CalibrationResult, data
     differs, not whether that matters where the board was, or only where no view reached."""
     w, h = result.image_size
     corners = [np.concatenate([d.measured for d in data if d.index in idx]) for idx in half_views]
-    both = np.logical_and(*[_cell_counts(c, result.image_size) > 0 for c in corners])
+    both = np.logical_and(*[cell_counts(c, result.image_size) > 0 for c in corners])
 
     def in_both(px: np.ndarray) -> np.ndarray:
-        return both[_cell_of(px[:, 0], w), _cell_of(px[:, 1], h)]
+        return both[cell_of(px[:, 0], w), cell_of(px[:, 1], h)]
 
     seen = np.concatenate(corners)
     seen = seen[in_both(seen)] if both.any() else seen
@@ -792,7 +775,7 @@ def _halves_projection(first: CalibrationResult, second: CalibrationResult, data
             f"rotation of the camera frame of {pd.angle_deg:.2f}° that the board poses take up (mrcal's "
             "projection_diff): what a user of either would see differ, and where. ")
     if looked.size:
-        text += (f"Where both halves saw the board ({int(both.sum())} of {COVERAGE_CELLS ** 2} cells) they differ by "
+        text += (f"Where both halves saw the board ({int(both.sum())} of {CELLS ** 2} cells) they differ by "
                  f"a median of {np.median(looked):.2f} px, {looked.max():.2f} px at most")
     else:
         text += "No cell of the image holds corners of both halves"
