@@ -23,8 +23,9 @@ def _reach(known: float, beyond: float | None) -> Reach:
 
 
 def test_a_note_only_where_the_projection_beyond_the_views_is_much_less_known():
-    note = _reach(0.5, 20.0).note()
-    assert note is not None and "20.0 px at worst" in note and "0.50 px" in note and "12 of" in note
-    assert _reach(0.5, 2.5).note() is None    # under 3 px: what a moving-board recording leaves
-    assert _reach(2.0, 5.0).note() is None    # under 3 times what the views reached
-    assert _reach(0.5, None).note() is None   # the views reached every cell
+    far = _reach(0.5, 20.0).extrapolated()
+    assert far == (12, 20.0, 0.5)
+    assert "20.0 px at worst" in far.note() and "0.50 px" in far.note() and "12 of" in far.note()
+    assert _reach(0.5, 2.5).extrapolated() is None    # under 3 px: what a moving-board recording leaves
+    assert _reach(2.0, 5.0).extrapolated() is None    # under 3 times what the views reached
+    assert _reach(0.5, None).extrapolated() is None   # the views reached every cell

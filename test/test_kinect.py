@@ -214,12 +214,14 @@ def test_where_no_view_reached_the_result_says_so_and_the_halves_bear_it_out(vie
     there and by 1.88 px in the median where the views reached (2026-11-29). Their difference
     has about twice the whole's spread (each half has twice its variance): measured 1.30 and
     1.32 times that, so the spread is of the right size."""
-    assert any("extrapolated" in n for n in ours_all.notes), ours_all.notes
     size = ours_all.image_size
     corners = np.concatenate([views[v.index].corners for v in ours_all.views])
     spread = reach(np.r_[np.diag(ours_all.K)[:2], ours_all.K[:2, 2], ours_all.D], ours_all.run_intrinsics, corners,
                    size)
     assert spread.beyond.max() > 10 * np.median(spread.known)
+    assert ours_all.extrapolated == (spread.cells, spread.beyond.max(), np.median(spread.known))
+    assert ours_all.extrapolated.note() in ours_all.notes
+    assert f"known to {spread.beyond.max():.1f} px only" in ours_all.summary(len(views), 1.0)
     first, second = (np.r_[np.diag(r.K)[:2], r.K[:2, 2], r.D] for r in recording_halves)
     halves = projection_difference(first, second, size, corners).diff
     ratios = (np.median(halves[spread.inside]) / (2 * np.median(spread.known)),

@@ -45,17 +45,26 @@ class Reach(NamedTuple):
     def beyond(self) -> np.ndarray:
         return self.spread[~self.inside & np.isfinite(self.spread)]
 
-    def note(self) -> str | None:
-        """A line for the result's notes where the projection beyond the views is much less known."""
+    def extrapolated(self) -> Extrapolated | None:
+        """Where the projection beyond the views is much less known than inside them, by how much."""
         if not (self.known.size and self.beyond.size):
             return None
         inside, worst = float(np.median(self.known)), float(self.beyond.max())
         if worst <= max(EXTRAPOLATION_PX, EXTRAPOLATION_RATIO * inside):
             return None
+        return Extrapolated(self.cells, worst, inside)
+
+
+class Extrapolated(NamedTuple):
+    cells: int        # of the CELLS x CELLS the views reached
+    worst: float      # px, the projection's worst spread beyond them
+    inside: float     # px, its median where they reached
+
+    def note(self) -> str:
         return (f"the views reached {self.cells} of the image's {CELLS}x{CELLS} cells; beyond them the lens terms are "
-                f"extrapolated and each pixel's projection is known to {worst:.1f} px at worst ({inside:.2f} px in the "
-                "median where they reached, from the refits without each run of views): do not use the calibration "
-                "there as inside, or add views that reach the image's edges")
+                f"extrapolated and each pixel's projection is known to {self.worst:.1f} px at worst ({self.inside:.2f} "
+                "px in the median where they reached, from the refits without each run of views): do not use the "
+                "calibration there as inside, or add views that reach the image's edges")
 
 
 def reach(intrinsics: np.ndarray, runs: np.ndarray, corners: np.ndarray, image_size: tuple[int, int]) -> Reach:

@@ -514,14 +514,15 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     model.wiggle_period = options.wiggle_period
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
-    if runs is not None:
-        extrapolated = reach(stated.state.intrinsics, runs[:, :N_INTRINSICS],
-                             np.concatenate([v.corners for v in prepared]), image_size).note()
-        if extrapolated is not None:
-            notes.append(extrapolated)
-            say(extrapolated)
+    extrapolated = None if runs is None else reach(stated.state.intrinsics, runs[:, :N_INTRINSICS],
+                                                   np.concatenate([v.corners for v in prepared]),
+                                                   image_size).extrapolated()
+    if extrapolated is not None:
+        notes.append(extrapolated.note())
+        say(notes[-1])
     result = _result(asked, model, board, image_size, stated, prepared, planes, rejected, notes, corner_fit,
                      noise_fit, depth_focal, runs)
+    result.extrapolated = extrapolated
     if corner_fit is not None:
         result.depth_square = board.square * square_from_depth(
             corner_fit.state.intrinsics, [v.corners for v in prepared], full_depths, obj, convention)

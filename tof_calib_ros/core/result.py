@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import f as f_distribution
 
+from .coverage import CELLS, Extrapolated
 from .depth_bias import NAMES
 from .options import DISTORTION_TERMS, CalibrationOptions, Model
 
@@ -112,6 +113,8 @@ class CalibrationResult:
     # (R, 9) the intrinsics refitted without each of R runs of consecutive views, the jackknife
     # behind the stated sigmas: how well each pixel's projection is known (core.projection_diff)
     run_intrinsics: np.ndarray | None = None
+    # where the views left part of the image unreached and the projection there is much less known
+    extrapolated: Extrapolated | None = None
 
     @property
     def depth_offset(self) -> float:
@@ -191,7 +194,10 @@ class CalibrationResult:
                 f"cx={self.K[0, 2]:.2f}±{s['cx']:.2f} cy={self.K[1, 2]:.2f}±{s['cy']:.2f} px; "
                 f"D=[{', '.join(f'{d:.4g}' for d in self.D)}]; pixel RMS {self.pixel_rms:.3f} px, "
                 f"depth RMS {self.depth_rms * 1e3:.2f} mm, depth offset {self.depth_offset * 1e3:.1f} mm; "
-                f"{len(self.views)} of {n_views} views used; {seconds:.1f} s")
+                f"{len(self.views)} of {n_views} views used; {seconds:.1f} s"
+                + ("" if self.extrapolated is None else
+                   f"; the views reached {self.extrapolated.cells} of {CELLS * CELLS} image cells, beyond them the "
+                   f"projection is known to {self.extrapolated.worst:.1f} px only"))
 
     def to_dict(self) -> dict:
         """Everything the result holds, as plain JSON-ready types."""
@@ -219,6 +225,7 @@ class CalibrationResult:
             "depth_full_weight_focal": None if self.depth_focal is None else dict(zip(
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.depth_focal))),
             "intrinsics_without_each_run": None if self.run_intrinsics is None else self.run_intrinsics.tolist(),
+            "extrapolated": None if self.extrapolated is None else self.extrapolated._asdict(),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
