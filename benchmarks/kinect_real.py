@@ -35,6 +35,8 @@ import numpy as np
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate
 from tof_calib_ros.collect.replay import worker_context
+from tof_calib_ros.core.camera import pack_intrinsics
+from tof_calib_ros.core.coverage import CELLS, reach
 from tof_calib_ros.core.detection import detect_corners
 
 BOARD = Board(5, 7, 0.03)
@@ -133,6 +135,16 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
         report["reference"][name] = {"K": res.K.tolist(), "D": res.D.tolist(), "std": res.std,
                                      "depth_bias": res.depth_bias.tolist(), "pixel_rms": res.pixel_rms,
                                      "model": res.model.to_dict(), "trusted": res.ok}
+        if res.run_intrinsics is not None:   # where over the image the projection is known (core.coverage)
+            known = reach(pack_intrinsics(res.K, res.D), res.run_intrinsics,
+                          np.concatenate([views[v.index].corners for v in res.views]), res.image_size)
+            print(f"  {'':18} each pixel's projection known to {np.median(known.known):.2f} px in the median over "
+                  f"the {known.cells} of {CELLS * CELLS} cells the views reached, "
+                  f"{known.beyond.max() if known.beyond.size else float('nan'):.2f} px at worst beyond them"
+                  + ("; noted" if res.extrapolated is not None else ""))
+            report["reference"][name]["projection_known_px"] = {
+                "cells": known.cells, "inside_median": float(np.median(known.known)),
+                "beyond_worst": float(known.beyond.max()) if known.beyond.size else None}
     # OpenCV's principal point moves with the lens terms it fits: against ROS's default (k3
     # fixed) and against OpenCV fitting the terms this method chose
     trad = refs["traditional"].K
