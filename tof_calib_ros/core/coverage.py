@@ -60,6 +60,11 @@ class Extrapolated(NamedTuple):
     worst: float      # px, the projection's worst spread beyond them
     inside: float     # px, its median where they reached
 
+    def brief(self) -> str:
+        """For the one-line summary."""
+        return (f"the views reached {self.cells} of {CELLS * CELLS} image cells, beyond them the projection is known "
+                f"to {self.worst:.1f} px only")
+
     def note(self) -> str:
         return (f"the views reached {self.cells} of the image's {CELLS}x{CELLS} cells; beyond them the lens terms are "
                 f"extrapolated and each pixel's projection is known to {self.worst:.1f} px at worst ({self.inside:.2f} "

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .bundle import jackknife_spread
 from .camera import project, rays, unfolded
 
 # A pixel whose ray does not project back to it within this (px) is one where Newton's method
@@ -45,35 +46,55 @@ def _unit_rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def implied_rotation(a: np.ndarray, b: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    """The rotation R that best takes ``a``'s rays through the pixels ``seen`` onto ``b``'s
-    (Wahba's problem, solved by the SVD): packed intrinsics ``a``, ``b`` as in core.camera."""
-    va, vb = _unit_rays(seen, a), _unit_rays(seen, b)
+def _rotation(va: np.ndarray, vb: np.ndarray) -> np.ndarray:
+    """The rotation R that best takes the unit rays ``va`` onto ``vb`` (Wahba's problem, solved by
+    the SVD), over the pairs both models give."""
     ok = np.isfinite(va).all(axis=1) & np.isfinite(vb).all(axis=1)
     U, _, Vt = np.linalg.svd(va[ok].T @ vb[ok])
     d = np.sign(np.linalg.det(Vt.T @ U.T))
     return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
 
 
-def projection_difference(a: np.ndarray, b: np.ndarray, image_size: tuple[int, int], seen: np.ndarray,
-                          step: int = 8) -> ProjectionDiff:
-    """How far (px) ``b`` projects the ray ``a`` gives each pixel of a grid over the image (every
-    ``step`` px), after the rotation that aligns them over the pixels ``seen`` (N, 2)."""
+class _From(NamedTuple):
+    """One calibration's rays through a grid over the image and through the pixels the board was
+    seen at: what every comparison with it starts from, computed once."""
+    xs: np.ndarray
+    ys: np.ndarray
+    grid: np.ndarray       # (N, 2) px
+    rays: np.ndarray       # (N, 3) unit rays through ``grid``
+    seen: np.ndarray       # (M, 2) px
+    seen_rays: np.ndarray  # (M, 3)
+
+
+def _rays_from(a: np.ndarray, image_size: tuple[int, int], seen: np.ndarray, step: int) -> _From:
     w, h = image_size
     xs = np.arange(step / 2 - 0.5, w - 0.5, step)
     ys = np.arange(step / 2 - 0.5, h - 0.5, step)
     grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    R = implied_rotation(a, b, np.asarray(seen, dtype=float).reshape(-1, 2))
-    va = _unit_rays(grid, a)
-    ok = np.isfinite(va).all(axis=1)
-    moved = va[ok] @ R.T
-    shift = np.full((len(grid), 2), np.nan)
+    seen = np.asarray(seen, dtype=float).reshape(-1, 2)
+    return _From(xs, ys, grid, _unit_rays(grid, a), seen, _unit_rays(seen, a))
+
+
+def _to(src: _From, b: np.ndarray) -> ProjectionDiff:
+    """How far ``b`` projects the rays of ``src``, after the rotation that aligns them over its seen pixels."""
+    R = _rotation(src.seen_rays, _unit_rays(src.seen, b))
+    ok = np.isfinite(src.rays).all(axis=1)
+    moved = src.rays[ok] @ R.T
+    shift = np.full((len(src.grid), 2), np.nan)
     # a ray behind b's camera, or past where b's lens model folds, has no pixel in b
     seen_by_b = moved[:, 2] > 0
     seen_by_b[seen_by_b] = unfolded(moved[seen_by_b, :2] / moved[seen_by_b, 2:], b)
     idx = np.flatnonzero(ok)[seen_by_b]
-    shift[idx] = project(moved[seen_by_b], b).pixels - grid[idx]
-    return ProjectionDiff(xs, ys, shift.reshape(len(ys), len(xs), 2), R)
+    shift[idx] = project(moved[seen_by_b], b).pixels - src.grid[idx]
+    return ProjectionDiff(src.xs, src.ys, shift.reshape(len(src.ys), len(src.xs), 2), R)
+
+
+def projection_difference(a: np.ndarray, b: np.ndarray, image_size: tuple[int, int], seen: np.ndarray,
+                          step: int = 8) -> ProjectionDiff:
+    """How far (px) ``b`` projects the ray ``a`` gives each pixel of a grid over the image (every
+    ``step`` px), after the rotation that aligns them over the pixels ``seen`` (N, 2); packed
+    intrinsics ``a``, ``b`` as in core.camera."""
+    return _to(_rays_from(a, image_size, seen, step), b)
 
 
 def projection_spread(center: np.ndarray, refits: np.ndarray, image_size: tuple[int, int], seen: np.ndarray,
@@ -83,8 +104,6 @@ def projection_spread(center: np.ndarray, refits: np.ndarray, image_size: tuple[
     each) project the rays ``center`` gives, each aligned as in ``projection_difference``. Where
     no view reached, each refit extrapolates its lens terms its own way: what a parameter's
     standard deviation cannot show."""
-    pds = [projection_difference(center, r, image_size, seen, step) for r in refits]
-    shifts = np.array([p.shift for p in pds])
-    m = len(shifts)
-    spread = np.sqrt((m - 1) / m * np.sum((shifts - shifts.mean(axis=0)) ** 2, axis=(0, 3)))
-    return pds[0].xs, pds[0].ys, spread
+    src = _rays_from(center, image_size, seen, step)
+    spread = jackknife_spread(np.array([_to(src, r).shift for r in refits]))   # (H', W', 2)
+    return src.xs, src.ys, np.hypot(spread[..., 0], spread[..., 1])

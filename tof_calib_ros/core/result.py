@@ -2,13 +2,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.stats import f as f_distribution
 
-from .coverage import CELLS, Extrapolated
 from .depth_bias import NAMES
 from .options import DISTORTION_TERMS, CalibrationOptions, Model
+
+if TYPE_CHECKING:   # coverage reaches bundle, which imports this module
+    from .coverage import Extrapolated
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
@@ -195,9 +198,7 @@ class CalibrationResult:
                 f"D=[{', '.join(f'{d:.4g}' for d in self.D)}]; pixel RMS {self.pixel_rms:.3f} px, "
                 f"depth RMS {self.depth_rms * 1e3:.2f} mm, depth offset {self.depth_offset * 1e3:.1f} mm; "
                 f"{len(self.views)} of {n_views} views used; {seconds:.1f} s"
-                + ("" if self.extrapolated is None else
-                   f"; the views reached {self.extrapolated.cells} of {CELLS * CELLS} image cells, beyond them the "
-                   f"projection is known to {self.extrapolated.worst:.1f} px only"))
+                + ("" if self.extrapolated is None else f"; {self.extrapolated.brief()}"))
 
     def to_dict(self) -> dict:
         """Everything the result holds, as plain JSON-ready types."""
