@@ -30,6 +30,11 @@ def cell_counts(pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     return counts
 
 
+def in_cells(cells: np.ndarray, pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """Whether each of ``pixels`` (..., 2) lies in a cell ``cells`` (CELLS, CELLS, by x then y) marks."""
+    return cells[cell_of(pixels[..., 0], image_size[0]), cell_of(pixels[..., 1], image_size[1])]
+
+
 class Reach(NamedTuple):
     xs: np.ndarray        # (W',) pixel columns of the map
     ys: np.ndarray        # (H',) pixel rows
@@ -77,5 +82,5 @@ def reach(intrinsics: np.ndarray, runs: np.ndarray, corners: np.ndarray, image_s
     without each run of views), and which pixels lie in cells the ``corners`` (N, 2) reached."""
     reached = cell_counts(corners, image_size) > 0
     xs, ys, spread = projection_spread(intrinsics, runs, image_size, corners)
-    gx, gy = np.meshgrid(xs, ys)
-    return Reach(xs, ys, spread, reached[cell_of(gx, image_size[0]), cell_of(gy, image_size[1])], int(reached.sum()))
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1)
+    return Reach(xs, ys, spread, in_cells(reached, grid, image_size), int(reached.sum()))

@@ -29,6 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from matplotlib import colormaps
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
@@ -37,7 +38,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from ..core import depth_bias as bias_model
 from ..core.board import Board
 from ..core.camera import depth_of, pack_intrinsics, project, transform
-from ..core.coverage import CELLS, cell_counts, cell_of, reach
+from ..core.coverage import CELLS, cell_counts, cell_of, in_cells, reach
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 from ..core.pipeline import calibrate
@@ -498,10 +499,8 @@ def _projection_spread(data: list[_ViewData], result: CalibrationResult) -> str:
     if result.run_intrinsics is None:
         return ('<p class="note">No map of the projection\'s uncertainty: this calibration was not refitted '
                 "without each run of views (the traditional method, or too few views).</p>")
-    w, h = result.image_size
     corners = np.concatenate([d.measured for d in data])
     known = reach(pack_intrinsics(result.K, result.D), result.run_intrinsics, corners, result.image_size)
-    xs, ys, spread = known.xs, known.ys, known.spread
     runs = len(result.run_intrinsics)
     text = (f"How far each pixel's projection moves when the calibration is refitted without each of its {runs} runs "
             "of consecutive views (the grouped jackknife behind the stated standard deviations, taken per pixel; "
@@ -512,18 +511,27 @@ def _projection_spread(data: list[_ViewData], result: CalibrationResult) -> str:
     if known.beyond.size:
         text += f"; beyond them, where the lens terms are extrapolated, to {known.beyond.max():.2f} px at worst"
     text += f". A jackknife over {runs} runs is rough: read it as a scale, not a bound."
-    fig = _new_figure(8.0, 6.4 * h / w + 0.8)
-    ax = fig.subplots()
-    top = np.nanpercentile(spread, 99) if np.isfinite(spread).any() else 1.0
-    mesh = ax.pcolormesh(xs, ys, spread, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
-    fig.colorbar(mesh, ax=ax, label="projection uncertainty (px)")
-    ax.contour(xs, ys, known.inside.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    fig, ax = _pixel_map(known.xs, known.ys, known.spread, known.inside, result.image_size,
+                         "projection uncertainty (px)", "how well each pixel's projection is known")
     ax.scatter(corners[:, 0], corners[:, 1], s=3, color="w", linewidths=0)
-    ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
-           title="how well each pixel's projection is known")
     return f"<p>{_e(text)}</p>" + _figure(fig, "projection uncertainty", (
         "The spread of each pixel's projection over the refits without each run of views (px; colour scale to its "
         "99th percentile). Cyan outlines the cells the views reached; the dots are the corners."))
+
+
+def _pixel_map(xs: np.ndarray, ys: np.ndarray, values: np.ndarray, outlined: np.ndarray,
+               image_size: tuple[int, int], label: str, title: str) -> tuple[Figure, Axes]:
+    """A map over the image in px (colour scale to its 99th percentile), the cells ``outlined``
+    (same grid) edged in cyan."""
+    w, h = image_size
+    fig = _new_figure(8.0, 6.4 * h / w + 0.8)   # the colour bar takes a fifth of the width
+    ax = fig.subplots()
+    top = np.nanpercentile(values, 99) if np.isfinite(values).any() else 1.0
+    mesh = ax.pcolormesh(xs, ys, values, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
+    fig.colorbar(mesh, ax=ax, label=label)
+    ax.contour(xs, ys, outlined.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)", title=title)
+    return fig, ax
 
 
 def _board_outline(board: Board, per_edge: int = 1) -> np.ndarray:
@@ -756,19 +764,13 @@ def _halves_projection(first: CalibrationResult, second: CalibrationResult, data
                        half_views: tuple[list[int], list[int]], result: CalibrationResult) -> str:
     """Where over the image the halves project apart: the table says by how much each parameter
     differs, not whether that matters where the board was, or only where no view reached."""
-    w, h = result.image_size
     corners = [np.concatenate([d.measured for d in data if d.index in idx]) for idx in half_views]
     both = np.logical_and(*[cell_counts(c, result.image_size) > 0 for c in corners])
-
-    def in_both(px: np.ndarray) -> np.ndarray:
-        return both[cell_of(px[:, 0], w), cell_of(px[:, 1], h)]
-
     seen = np.concatenate(corners)
-    seen = seen[in_both(seen)] if both.any() else seen
+    seen = seen[in_cells(both, seen, result.image_size)] if both.any() else seen
     pd = projection_difference(pack_intrinsics(first.K, first.D), pack_intrinsics(second.K, second.D),
                                result.image_size, seen)
-    grid = np.stack(np.meshgrid(pd.xs, pd.ys), axis=-1).reshape(-1, 2)
-    shared = in_both(grid).reshape(pd.diff.shape)
+    shared = in_cells(both, np.stack(np.meshgrid(pd.xs, pd.ys), axis=-1), result.image_size)
     looked = pd.diff[shared & np.isfinite(pd.diff)]
     elsewhere = pd.diff[~shared & np.isfinite(pd.diff)]
     text = (f"Each pixel's ray through the first half's calibration, projected through the second's, after a "
@@ -783,18 +785,12 @@ def _halves_projection(first: CalibrationResult, second: CalibrationResult, data
     text += (f"Against the corners' fit ({result.pixel_rms:.2f} px RMS): a difference far beyond it where both "
              "looked means the halves disagree on the lens itself; one that grows only where one looked means the "
              "views did not reach there, which the standard deviations above cannot show. Add views there.")
-    fig = _new_figure(8.0, 6.4 * h / w + 0.8)   # the colour bar takes a fifth of the width
-    ax = fig.subplots()
-    top = np.nanpercentile(pd.diff, 99) if np.isfinite(pd.diff).any() else 1.0
-    mesh = ax.pcolormesh(pd.xs, pd.ys, pd.diff, cmap="magma", vmin=0.0, vmax=max(top, 1e-3), shading="nearest")
-    fig.colorbar(mesh, ax=ax, label="projection difference (px)")
-    ax.contour(pd.xs, pd.ys, shared.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    fig, ax = _pixel_map(pd.xs, pd.ys, pd.diff, shared, result.image_size, "projection difference (px)",
+                         "first vs second half: projection difference")
     for c, marker, label in zip(corners, ("o", "x"), ("first half", "second half")):
         ax.scatter(c[:, 0], c[:, 1], s=4, marker=marker, color="w" if marker == "o" else "0.6", linewidths=0.6,
                    label=label)
     ax.legend(loc="lower right", fontsize=8, markerscale=3, facecolor="0.35", labelcolor="w")
-    ax.set(xlim=(-0.5, w - 0.5), ylim=(h - 0.5, -0.5), aspect="equal", xlabel="x (px)", ylabel="y (px)",
-           title="first vs second half: projection difference")
     return f"<p>{_e(text)}</p>" + _figure(fig, "projection difference of the halves", (
         "The halves' projection difference over the image (px; colour scale to its 99th percentile). Cyan outlines "
         "the cells where both halves saw the board; the dots are the halves' corners."))
