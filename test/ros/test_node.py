@@ -167,15 +167,20 @@ def test_bad_messages_are_reported_not_fatal(launch, spinner):
          "board"),
     ]
     stamp = 1000.0
+    malformed_sent = 0
     for what, amplitude, depth, expected in cases:
         def rejected() -> bool:
-            nonlocal stamp
+            nonlocal stamp, malformed_sent
             stamp += 1.0   # a new pair each time: best-effort delivery may lose one
             amplitude_pub.publish(amplitude(stamp))
             depth_pub.publish(depth(stamp))
+            malformed_sent += what != "no board in the image"
             return expected in latest[0].get("last rejection", "")
         wait_until(rejected, 15.0, lambda: f"'{expected}' in the diagnostics' last rejection after {what} "
                    f"(last seen: {latest[0].get('last rejection')!r})", node, period=0.3)
+    # Each malformed kind was skipped at least once and counted; a frame without a board is not malformed.
+    skipped = int(latest[0].get("frames skipped (malformed)", "-1"))
+    assert 5 <= skipped <= malformed_sent, (skipped, malformed_sent, latest[0])
 
     # A non-finite float amplitude must not end the worker either; the node then still answers.
     for _ in range(3):

@@ -133,6 +133,7 @@ class CalibrationNode(Node):
         self.frame_id = ""
         self.dropped = 0
         self.received = [0, 0]                 # frames that arrived on amplitude and on depth
+        self.malformed = 0                     # pairs skipped as undecodable or of mismatched sizes
         self.paired = 0
         self.last_problem = ""
         self.bag_topics: dict[str, str] = {}   # the bag's, when replaying one
@@ -234,22 +235,22 @@ class CalibrationNode(Node):
             try:
                 self._collect(amplitude_msg, depth_msg, generation, idle)
             except Exception as exc:  # noqa: BLE001 - a bad frame must never end the worker
-                self._problem("internal", f"frame skipped: {exc}")
+                self._skip("internal", f"frame skipped: {exc}")
 
     def _collect(self, amplitude_msg: Image, depth_msg: Image, generation: int, thorough: bool) -> None:
         try:
             amplitude = decode_image(amplitude_msg)
             depth = depth_to_metres(decode_image(depth_msg), depth_msg.encoding, self._param("depth.scale"))
         except ImageError as exc:
-            self._problem("decode", f"frame skipped: {exc}")
+            self._skip("decode", f"frame skipped: {exc}")
             return
         if amplitude.shape != depth.shape:
-            self._problem("size", f"frame skipped: amplitude {amplitude.shape[1]}x{amplitude.shape[0]} and depth "
+            self._skip("size", f"frame skipped: amplitude {amplitude.shape[1]}x{amplitude.shape[0]} and depth "
                           f"{depth.shape[1]}x{depth.shape[0]} differ in size")
             return
         info = self.driver_info
         if info is not None and (info.width, info.height) not in ((0, 0), (depth.shape[1], depth.shape[0])):
-            self._problem("size", f"frame skipped: images are {depth.shape[1]}x{depth.shape[0]} but camera_info says "
+            self._skip("size", f"frame skipped: images are {depth.shape[1]}x{depth.shape[0]} but camera_info says "
                           f"{info.width}x{info.height}")
             return
         self.frame_id = depth_msg.header.frame_id or amplitude_msg.header.frame_id
@@ -366,6 +367,10 @@ class CalibrationNode(Node):
     def _problem(self, kind: str, text: str) -> None:
         self.last_problem = text
         self._warn.warn(kind, text)
+
+    def _skip(self, kind: str, text: str) -> None:
+        self.malformed += 1
+        self._problem(kind, text)
 
     # -- services ----------------------------------------------------------------------------
     def _on_calibrate(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
@@ -497,6 +502,7 @@ class CalibrationNode(Node):
         values["frames received (amplitude, depth)"] = f"{self.received[0]}, {self.received[1]}"
         values.update({f"coverage.{k}": a["progress"] for k, a in progress["axes"].items()})
         values["frames dropped (worker busy)"] = self.dropped
+        values["frames skipped (malformed)"] = self.malformed
         values["last rejection"] = self.last_problem
         status.values = [KeyValue(key=str(k), value=f"{v:.2f}" if isinstance(v, float) else str(v))
                          for k, v in values.items()]
