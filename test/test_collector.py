@@ -320,6 +320,18 @@ def test_a_replay_finds_the_accurate_corners_once_its_views_are_known_and_counts
     assert run.collector.unsharpened() == [] and run.collector.dropped[0].endswith("lost")
 
 
+def test_a_replay_tells_its_caller_of_every_skip_the_source_s_and_its_own(sweep_frames):
+    # The node warns of what its on_skip hears: a message the bag could not decode (the source's
+    # skip) as well as a frame of another size (the replay's own) must reach it, counted once each.
+    heard = []
+    f = sweep_frames[0]
+    items = [_Stream(f.amplitude, f.depth, 0.0), replay.Skip("undecodable", "bag@3", "truncated message"),
+             _Stream(f.amplitude[:-8], f.depth[:-8], 1.0)]
+    summary = replay.Replay(BOARD, CollectorConfig(), on_skip=heard.append).run(iter(items))
+    assert [s.kind for s in heard] == ["undecodable", "size"], heard
+    assert dict(summary.skipped) == {"undecodable": 1, "size": 1} and summary.frames == 1
+
+
 def test_another_image_size_is_rejected_until_reset(sweep_frames):
     col = ViewCollector(BOARD)
     _feed(col, sweep_frames[:2])

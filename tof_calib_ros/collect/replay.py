@@ -308,7 +308,7 @@ class Replay:
         amplitude image, in order."""
         config = self.collector.config
         # a still depends on no other frame, and costs a whole detection: one per task balances best
-        chunks = _chunks(frames, self.summary.skip, 1 if config.stills else CHUNK_FRAMES)
+        chunks = _chunks(frames, self._skip, 1 if config.stills else CHUNK_FRAMES)
 
         def work(chunk: list[Frame]) -> tuple:
             return [f.amplitude_source() for f in chunk], self.board, config
