@@ -251,8 +251,8 @@ def test_accurate_corners_are_found_for_the_views_kept_only_and_a_view_they_lose
     frames = [_frame(_pose(*p), seed=i) for i, p in enumerate(poses)]
     looked_at = []
 
-    def counted(amplitude, board, quick, in_region):
-        looked_at.append(tracking.accurate_detect(amplitude, board, quick, in_region))
+    def counted(amplitude, board, quick):
+        looked_at.append(tracking.accurate_detect(amplitude, board, quick))
         return looked_at[-1]
 
     monkeypatch.setattr(collector, "accurate_detect", counted)
@@ -272,7 +272,7 @@ def test_accurate_corners_are_found_for_the_views_kept_only_and_a_view_they_lose
     col = ViewCollector(BOARD)
     _feed(col, frames[:3], dt=1.0)
     (k0, a0, q0), (k1, *_), (k2, *_) = col.unsharpened()
-    dropped = col.sharpen({k1: Detection(None, "no board"), k0: tracking.accurate_detect(a0, BOARD, q0, True),
+    dropped = col.sharpen({k1: Detection(None, "no board"), k0: tracking.accurate_detect(a0, BOARD, q0),
                            k2 + 1000: Detection(None, "a view no longer kept")})
     assert dropped == ["the view taken at 1.000 s dropped: board lost by the accurate detector: no board"]
     assert col.dropped == dropped and len(col) == 2 and [k for k, *_ in col.unsharpened()] == [k2]
@@ -306,10 +306,9 @@ def test_a_replay_finds_the_accurate_corners_once_its_views_are_known_and_counts
     frames = [_frame(_pose(*p), seed=i) for i, p in enumerate(SWEEP[:4])]
     calls, accepted = [], []
 
-    def second_lost(amplitude, board, quick, in_region):
+    def second_lost(amplitude, board, quick):
         calls.append(len(accepted))
-        return Detection(None, "lost") if len(calls) == 2 else tracking.accurate_detect(amplitude, board, quick,
-                                                                                         in_region)
+        return Detection(None, "lost") if len(calls) == 2 else tracking.accurate_detect(amplitude, board, quick)
 
     monkeypatch.setattr(replay, "accurate_detect", second_lost)
     run = replay.Replay(BOARD, CollectorConfig(), on_outcome=lambda _f, _a, o: accepted.append(o.accepted))

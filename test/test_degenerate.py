@@ -271,7 +271,7 @@ def test_an_unconstrained_combination_has_infinite_variance_not_none():
     # other units (x1000), is constrained. A pseudo-inverse gave 0 and 1 a small finite variance.
     J = np.array([[1.0, 1.0, 0.0], [2.0, 2.0, 1000.0], [0.0, 0.0, 3000.0]])
     normal = bundle._Normal(J.T @ J, np.zeros((0, 3, 6)), np.zeros((0, 6, 6)), np.zeros(3), np.zeros((0, 6)))
-    cov = bundle.global_covariance(normal, free_poses=False)
+    cov = bundle.global_covariance(normal)
     assert np.isinf(cov[0, 0]) and np.isinf(cov[1, 1])
     reduced = J[:, 1:]   # parameter 0 folded into 1: what the views do constrain
     assert cov[2, 2] == pytest.approx(np.linalg.inv(reduced.T @ reduced)[1, 1], rel=1e-9)

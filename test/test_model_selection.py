@@ -466,7 +466,7 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
                                                                     "z", period)
     obs = view_planes.view_observations(seen["obj"], seen["prepared"], depths, floors, wiggles, radials)
     truth = bundle.State(intr, bias, np.array([np.r_[np.ravel(r), np.ravel(t)] for r, t in poses]))
-    problem = bundle.Problem(obs, "z", np.full(5, 0.01), np.full(5, 1e-3), [0, 1, 2, 3], True, None, period)
+    problem = bundle.Problem(obs, "z", np.full(5, 0.01), np.full(5, 1e-3), [0, 1, 2, 3], None, period)
     _, ddep, _, _ = problem.raw(truth)
     assert np.max(np.abs(ddep)) < 2e-5, np.max(np.abs(ddep))
 

@@ -19,8 +19,8 @@ from tof_calib_ros.ros import node as node_module  # noqa: E402
 def test_the_worker_leaves_a_kept_view_s_accurate_corners_to_the_sharpening_thread(ros, monkeypatch):
     found = []   # (thread name, detection), as the node's accurate detections come
 
-    def recorded(amplitude, board, quick, in_region):
-        found.append((threading.current_thread().name, tracking.accurate_detect(amplitude, board, quick, in_region)))
+    def recorded(amplitude, board, quick):
+        found.append((threading.current_thread().name, tracking.accurate_detect(amplitude, board, quick)))
         return found[-1][1]
 
     monkeypatch.setattr(node_module, "accurate_detect", recorded)

@@ -78,9 +78,7 @@ class CollectorConfig:
     """``spans``: per axis of ``AXES``, the range of kept views that counts as full progress
     (camera_calibration's 0.7, 0.7, 0.4, 0.5, then depth and tilt). ``stills``: every frame is a
     still (no stream to measure the board's speed in), so only the frame's own evidence of motion counts.
-    ``detect_in_region``: the accurate corners are found in the region around the quick ones
-    (``accurate_detect``: a tenth of the time at 640x576, and nearer the truth), not in the
-    whole image. ``exposure_s``: how long a frame is exposed (all phases of a multi-phase ToF
+    ``exposure_s``: how long a frame is exposed (all phases of a multi-phase ToF
     frame), and ``max_blur_px`` how far the board may move in that time (camera_calibration's
     ``max_chessboard_speed``, in physical units: 5 ms and 1.5 px allow 300 px/s). The default
     exposure is the short end of ToF cameras' (5 to 30 ms for all phases): on a camera that
@@ -99,7 +97,6 @@ class CollectorConfig:
     max_tilt_deg: float = 60.0
     spans: tuple[float, ...] = (0.7, 0.7, 0.4, 0.5, 0.3, 0.5)
     stills: bool = False
-    detect_in_region: bool = True
 
     def __post_init__(self) -> None:
         reals = {name: getattr(self, name) for name in
@@ -197,7 +194,7 @@ class ViewCollector:
         A view whose accurate corners are lost or stray from its quick ones is dropped; why, for
         each, is returned and added to ``dropped``."""
         if found is None:
-            found = {k: accurate_detect(a, self.board, q, self.config.detect_in_region)
+            found = {k: accurate_detect(a, self.board, q)
                      for k, a, q in self.unsharpened()}
         reasons = []
         for key, accurate in found.items():

@@ -139,7 +139,7 @@ def locate_still(amplitude: np.ndarray, board: Board, config: CollectorConfig) -
     """A still's board, searched for in the whole image, and its accurate corners."""
     found = quick_locate(amplitude, board, thorough=True)
     return Located(found, None if found.corners is None else
-                   accurate_detect(amplitude, board, found.corners, config.detect_in_region))
+                   accurate_detect(amplitude, board, found.corners))
 
 
 def worker_context() -> multiprocessing.context.BaseContext:
@@ -261,7 +261,7 @@ class Replay:
         recording at 200x200 would have cost), and whichever worker finds them, the views are the same."""
         with self._lock:
             todo = self.collector.unsharpened()
-        work = [(amplitude, self.board, quick, self.collector.config.detect_in_region) for _, amplitude, quick in todo]
+        work = [(amplitude, self.board, quick) for _, amplitude, quick in todo]
         if pool is None:
             with single_threaded():   # as in a worker
                 found = list(itertools.starmap(accurate_detect, work))

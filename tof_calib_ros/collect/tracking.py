@@ -39,7 +39,7 @@ def quick_locate(amplitude: np.ndarray, board: Board, near: np.ndarray | None = 
                  before: np.ndarray | None = None, whole_image: bool = True, thorough: bool = False) -> Detection:
     """The quick corners ``add`` judges a frame by, with a blank or constant frame as a miss.
 
-    ``near``: the corners last seen, when the caller keeps them (offline replay), and ``before``
+    ``near``: the corners last seen, when the caller keeps them (``BoardTracker``), and ``before``
     the ones of the frame before those. A board held still or moved smoothly is then
     followed (``_follow``, about 1 ms where the detector takes 10 to 60 ms): from where its
     motion so far puts it, then from where it was. Failing that, the detector looks in the
@@ -108,16 +108,14 @@ class BoardTracker:
         return found
 
 
-def accurate_detect(amplitude: np.ndarray, board: Board, quick: np.ndarray, in_region: bool) -> Detection:
-    """``detect``'s accurate corners of a frame whose quick corners are ``quick``: in the whole
-    image, or (``in_region``) in the region around the quick corners, with the whole image's
-    choice of upscaling. On a 640x576 image the region takes a tenth of the time, and its
-    tone mapping, fitted to the board rather than the whole scene, gave corners nearer the truth
-    on rendered views (0.08 against 0.13 px RMS; the same at 200x200). In the region, the quick
+def accurate_detect(amplitude: np.ndarray, board: Board, quick: np.ndarray) -> Detection:
+    """``detect``'s accurate corners of a frame whose quick corners are ``quick``, found in the
+    region around the quick corners with the whole image's choice of upscaling. Against the
+    whole image, at 640x576 the region takes a tenth of the time, and its tone mapping, fitted to
+    the board rather than the whole scene, gave corners nearer the truth on rendered views (0.08
+    against 0.13 px RMS; the same at 200x200). In the region, the quick
     corners stand for ``detect``'s first look (``sharpen``), which is searched for again only
     where the second look fails."""
-    if not in_region:
-        return detect(amplitude, board)
     margin = NEAR_MARGIN_SQUARES * _square_px(quick, board) + NEAR_MARGIN_PX
     (x0, y0), (x1, y1) = _region(quick, margin, amplitude.shape)
     region, origin = amplitude[y0:y1 + 1, x0:x1 + 1], np.array([x0, y0], dtype=float)
@@ -193,7 +191,7 @@ def _follow(amplitude: np.ndarray, board: Board, previous: np.ndarray, square: f
     if not np.all((previous >= 0) & (previous <= [w - 1, h - 1])):   # expected partly off the image
         return None
     (x0, y0), (x1, y1) = _region(previous, 1.5 * square + NEAR_MARGIN_PX, amplitude.shape)
-    half = int(np.clip(round(0.35 * square), 2, 15))   # as detection's cornerSubPix window
+    half = int(np.clip(round(0.35 * square), 2, 15))   # detection's cornerSubPix rule, on this square size
     if min(x1 - x0, y1 - y0) < 2 * half + 5:
         return None
     try:

@@ -116,7 +116,6 @@ class Fit:
     depth_residuals: list[np.ndarray]   # per view, (N,) predicted - measured, metres (NaN if no depth)
     covariance: np.ndarray              # of the free global parameters, in the order of free_global
     free_global: np.ndarray             # indices into intrinsics + bias
-    cost: float
     iterations: int
     sigma_px: np.ndarray                # per view, the pixel and depth noise the fit assumed
     sigma_depth: np.ndarray
@@ -158,13 +157,12 @@ class Problem:
     """Residuals and Jacobian for a set of views, with some parameters held fixed."""
 
     def __init__(self, views: list[Observations], convention: str, sigma_px: np.ndarray,
-                 sigma_depth: np.ndarray, free_global, free_poses: bool = True,
+                 sigma_depth: np.ndarray, free_global,
                  weights: list[np.ndarray] | None = None, wiggle_period: float | None = None):
         self.n_views = len(views)
         self.convention = convention
         self.wiggle_period = wiggle_period
         self.free_global = np.asarray(free_global, dtype=int)
-        self.free_poses = free_poses
         self.points = np.concatenate([v.object_points for v in views])
         self.pixels = np.concatenate([v.pixels for v in views])
         self.depth = np.concatenate([v.depth for v in views])
@@ -185,23 +183,19 @@ class Problem:
 
     @property
     def n_params(self) -> int:
-        return len(self.free_global) + (6 * self.n_views if self.free_poses else 0)
+        return len(self.free_global) + 6 * self.n_views
 
     def unpack(self, x: np.ndarray, base: State) -> State:
         s = base.copy()
         flat = s.globals_
         flat[self.free_global] = x[: len(self.free_global)]
         s.intrinsics, s.bias = flat[:N_INTRINSICS], flat[N_INTRINSICS:]
-        if self.free_poses:
-            s.poses = x[len(self.free_global):].reshape(-1, 6).copy()
+        s.poses = x[len(self.free_global):].reshape(-1, 6).copy()
         return s
 
     def pack(self, state: State) -> np.ndarray:
         flat = state.globals_
-        parts = [flat[self.free_global]]
-        if self.free_poses:
-            parts.append(state.poses.ravel())
-        return np.concatenate(parts)
+        return np.concatenate([flat[self.free_global], state.poses.ravel()])
 
     def raw(self, state: State, jac: bool = False):
         """Unweighted residuals, predicted minus measured: pixels (N,2) and depth (N,), and
@@ -241,7 +235,7 @@ class Problem:
     def evaluate(self, state: State, jac: bool) -> tuple[np.ndarray, BlockJacobian | None]:
         """Whitened residual vector and, when asked, its Jacobian in the free parameters. Beside
         the views' rows, rows on the global parameters alone: the depth terms' weak priors and
-        what the views' depth off their planes says of the wiggle."""
+        what the views' depth off their planes says of the wiggle and of a radial offset."""
         dpix, ddep, jp, jd = self.raw(state, jac)
         prior = np.array([state.bias[i - N_INTRINSICS] / depth_bias.PRIOR_SIGMA[i - N_INTRINSICS]
                           for i in self.priors])
@@ -264,8 +258,7 @@ class Problem:
             alone[-1, free.index(RADIAL)] = a[0]
         view = np.concatenate([np.repeat(self.view, 2), self.view[self.has_depth], np.zeros(len(alone), dtype=int)])
         g = np.vstack([rows[:, self.free_global], alone])
-        pose = rows[:, N_GLOBAL:] if self.free_poses else np.zeros((len(rows), 6))
-        pose = np.vstack([pose, np.zeros((len(alone), 6))])
+        pose = np.vstack([rows[:, N_GLOBAL:], np.zeros((len(alone), 6))])
         return r, BlockJacobian(g, pose, view)
 
 
@@ -314,11 +307,9 @@ def _normal(J: BlockJacobian, r: np.ndarray, n_views: int) -> _Normal:
     return _Normal(J.globals_.T @ J.globals_, W, V, J.globals_.T @ r, gp)
 
 
-def _solve_normal(N: _Normal, lam: float, free_poses: bool) -> tuple[np.ndarray, np.ndarray]:
+def _solve_normal(N: _Normal, lam: float) -> tuple[np.ndarray, np.ndarray]:
     """Steps (global, pose) of the damped system, by the Schur complement on the globals."""
     U = N.U + lam * np.diag(np.maximum(np.diag(N.U), 1e-300))
-    if not free_poses:
-        return np.linalg.solve(U, -N.g_glob), np.zeros_like(N.g_pose)
     dV = np.maximum(np.einsum("vii->vi", N.V), 1e-300)
     Vinv = np.linalg.inv(N.V + lam * dV[:, :, None] * np.eye(6))
     WVinv = np.einsum("vgi,vij->vgj", N.W, Vinv)
@@ -329,7 +320,7 @@ def _solve_normal(N: _Normal, lam: float, free_poses: bool) -> tuple[np.ndarray,
     return dg, dp
 
 
-def global_covariance(N: _Normal, free_poses: bool) -> np.ndarray:
+def global_covariance(N: _Normal) -> np.ndarray:
     """Inverse of the Schur complement: the globals' covariance with the poses marginalised.
 
     A combination of parameters the views do not constrain at all (e.g. the principal point
@@ -337,10 +328,7 @@ def global_covariance(N: _Normal, free_poses: bool) -> np.ndarray:
     infinite variance; a pseudo-inverse would give it none, and a verdict built on that would
     trust a parameter the data never saw. Eigenvalues are taken of the matrix scaled to unit
     diagonal, so pixels, metres and distortion terms compare."""
-    if free_poses:
-        S = N.U - np.einsum("vgi,vij,vhj->gh", N.W, np.linalg.pinv(N.V), N.W)
-    else:
-        S = N.U
+    S = N.U - np.einsum("vgi,vij,vhj->gh", N.W, np.linalg.pinv(N.V), N.W)
     d = np.sqrt(np.maximum(np.diag(S), 0.0))
     scale = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
     w, vecs = np.linalg.eigh(S * np.outer(scale, scale))
@@ -364,11 +352,11 @@ def levenberg_marquardt(problem: Problem, state: State, max_iter: int = 100,
         improved = False
         while lam < 1e16:
             try:
-                dg, dp = _solve_normal(N, lam, problem.free_poses)
+                dg, dp = _solve_normal(N, lam)
             except np.linalg.LinAlgError:
                 lam *= 10
                 continue
-            step = np.concatenate([dg, dp.ravel()]) if problem.free_poses else dg
+            step = np.concatenate([dg, dp.ravel()])
             trial = problem.unpack(x + step, state)
             r_new, _ = problem.evaluate(trial, False)
             cost_new = r_new @ r_new
@@ -398,8 +386,8 @@ def _robust_sigma(values: np.ndarray, floor: float) -> float:
     return max(float(np.sqrt(np.mean(v ** 2))) if v.size else floor, floor)
 
 
-def solve(views: list[Observations], state: State, convention: str, free_global, free_poses: bool = True,
-          rounds: int = 3, loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
+def solve(views: list[Observations], state: State, convention: str, free_global, rounds: int = 3,
+          loss: str | None = None, sigma_floor: tuple[float, float] = (1e-4, 1e-5),
           max_iter: int = 100, wiggle_period: float | None = None, pooled_pixels: bool = False) -> Fit:
     """LM with per-view variances re-estimated from the residuals between rounds (the paper's
     normalisation); ``loss`` ('huber' or 'cauchy') down-weights outlying corners.
@@ -411,7 +399,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
     weights = None
     total_it = 0
     for _ in range(rounds):
-        problem = Problem(views, convention, sigma_px, sigma_d, free_global, free_poses, weights, wiggle_period)
+        problem = Problem(views, convention, sigma_px, sigma_d, free_global, weights, wiggle_period)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
         dpix, ddep, _, _ = problem.raw(state)
@@ -436,20 +424,20 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         if loss:
             weights = [loss_weights(loss, np.hypot(pix[j][:, 0], pix[j][:, 1]) / sigma_px[j]) for j in range(n)]
     problem_sigmas = np.maximum(sigma_px, MIN_NOISE[0]), np.maximum(sigma_d, MIN_NOISE[1])
-    problem = Problem(views, convention, *problem_sigmas, free_global, free_poses, weights, wiggle_period)
-    cov, cost = _covariance(problem, state, n, free_poses)
+    problem = Problem(views, convention, *problem_sigmas, free_global, weights, wiggle_period)
+    cov = _covariance(problem, state, n)
     dpix, ddep, _, _ = problem.raw(state)
     return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
-               problem.free_global, cost, total_it, problem_sigmas[0], problem_sigmas[1], weights,
+               problem.free_global, total_it, problem_sigmas[0], problem_sigmas[1], weights,
                wiggle_period)
 
 
-def _covariance(problem: Problem, state: State, n_views: int, free_poses: bool) -> tuple[np.ndarray, float]:
-    """The free global parameters' covariance at ``state``, and the whitened cost there."""
+def _covariance(problem: Problem, state: State, n_views: int) -> np.ndarray:
+    """The free global parameters' covariance at ``state``."""
     r, J = problem.evaluate(state, True)
     dof = max(len(r) - problem.n_params, 1)
     # Scaled by the residuals when they exceed the assumed noise, never below it.
-    return global_covariance(_normal(J, r, n_views), free_poses) * max((r @ r) / dof, 1.0), float(r @ r)
+    return global_covariance(_normal(J, r, n_views)) * max((r @ r) / dof, 1.0)
 
 
 def jackknife_folds(n: int, folds: int, consecutive: bool = False) -> list[np.ndarray]:
@@ -526,7 +514,7 @@ def _pooled_sandwich(views: list[Observations], fit: Fit, alike: Fit, convention
     shows in ``fit`` (its own): its weights are not its noise, so its own covariance misstates it
     (the sandwich: the Schur complement's inverse about each view's part, with the poses profiled
     out view by view)."""
-    problem = Problem(views, convention, alike.sigma_px, alike.sigma_depth, alike.free_global, True, alike.weights,
+    problem = Problem(views, convention, alike.sigma_px, alike.sigma_depth, alike.free_global, alike.weights,
                       alike.wiggle_period)
     _, J = problem.evaluate(alike.state, True)
     N = _normal(J, np.zeros(len(J.view)), len(views))
@@ -535,7 +523,7 @@ def _pooled_sandwich(views: list[Observations], fit: Fit, alike: Fit, convention
     n_pixel_rows = 2 * len(problem.view)
     share = np.ones(len(J.view))
     share[:n_pixel_rows] = (fit.sigma_px / alike.sigma_px)[np.repeat(problem.view, 2)] ** 2
-    bread = global_covariance(N, True)
+    bread = global_covariance(N)
     return bread @ (profiled.T @ (profiled * share[:, None])) @ bread
 
 
@@ -570,11 +558,11 @@ def score(views: list[Observations], fit: Fit, convention: str, extra) -> float:
     first order (the score test): the Gauss-Newton step's predicted gain, with the noise the fit
     assumed. At the fit's optimum only the extra parameters contribute to it."""
     free = np.r_[fit.free_global, np.asarray(extra, dtype=int)]
-    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, free, True, fit.weights,
+    problem = Problem(views, convention, fit.sigma_px, fit.sigma_depth, free, fit.weights,
                       wiggle_period=fit.wiggle_period)
     r, J = problem.evaluate(fit.state, True)
     N = _normal(J, r, len(views))
-    dg, dp = _solve_normal(N, 1e-9, True)
+    dg, dp = _solve_normal(N, 1e-9)
     return float(-(N.g_glob @ dg + np.sum(N.g_pose * dp)))
 
 

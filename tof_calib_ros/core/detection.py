@@ -137,17 +137,17 @@ def small(image: np.ndarray) -> bool:
     return min(image.shape) < UPSCALE_BELOW
 
 
-def detect(image: np.ndarray, board: Board, *, refine: bool = True,
-           upscale: bool | None = None, second_look: bool = True) -> Detection:
+def detect(image: np.ndarray, board: Board, *, upscale: bool | None = None,
+           second_look: bool = True) -> Detection:
     """Corners and the reason behind the result, for logs and user feedback.
 
-    ``refine``: sub-pixel refinement (cornerSubPix) of the classic detector's corners. Either
-    detector's board is looked at again by the SB detector in accuracy mode, at squares of
-    SB_SQUARE_PX (``_second_look``), unless ``second_look`` is False: a search that only needs to
-    know where the board is, whose corners are rougher. ``upscale`` None means: let the SB detector see a 2x
-    upscaled copy of images smaller than ``UPSCALE_BELOW`` first. A detection with any corner
-    off its neighbours' grid is rejected (the next detector is tried), not repaired: a corner
-    caught on glare or a wrong edge would bias the calibration more than a lost view.
+    The classic detector's corners are refined (cornerSubPix). Either detector's board is looked
+    at again by the SB detector in accuracy mode, at squares of SB_SQUARE_PX (``_second_look``),
+    unless ``second_look`` is False: a search that only needs to know where the board is, whose
+    corners are rougher. ``upscale`` None means: let the SB detector see a 2x upscaled copy of
+    images smaller than ``UPSCALE_BELOW`` first. A detection with any corner off its neighbours'
+    grid is rejected (the next detector is tried), not repaired: a corner caught on glare or a
+    wrong edge would bias the calibration more than a lost view.
     """
     stretched = _stretch(image)
     gray = np.clip(np.rint(stretched), 0, 255).astype(np.uint8)
@@ -173,9 +173,7 @@ def detect(image: np.ndarray, board: Board, *, refine: bool = True,
     if not found or raw is None or len(raw) != board.n_corners:
         reasons.append("classic detector found no board")
     else:
-        corners = raw.reshape(-1, 2).astype(np.float64)
-        if refine:
-            corners = _subpix(fine, corners, board)
+        corners = _subpix(fine, raw.reshape(-1, 2).astype(np.float64), board)
         bad = _grid_outliers(corners, board)
         if bad is None:
             found = Detection(_normalise_order(corners, board), "found by findChessboardCorners")
@@ -194,12 +192,12 @@ def locate(image: np.ndarray, board: Board) -> Detection:
     return Detection(_normalise_order(pts.reshape(-1, 2).astype(np.float64), board), "found by the quick check")
 
 
-def detect_corners(image: np.ndarray, board: Board, *, refine: bool = True) -> np.ndarray | None:
+def detect_corners(image: np.ndarray, board: Board) -> np.ndarray | None:
     """(N, 2) float64 corner pixels in Board order, or None when no trustworthy board is seen.
 
     Use ``detect`` instead to learn why a view was dropped.
     """
-    return detect(image, board, refine=refine).corners
+    return detect(image, board).corners
 
 
 def _detect_sb(gray: np.ndarray, board: Board, upscale: bool) -> np.ndarray | None:
@@ -311,9 +309,7 @@ def _grid_outliers(corners: np.ndarray, board: Board) -> str | None:
     if not spacing > 0:
         return "degenerate grid (coincident corners)"
     tol = max(OUTLIER_FRACTION * spacing, OUTLIER_MIN_PX)
-    wr, wc = min(3, board.rows), min(3, board.cols)
-    if wr * wc - 1 < 4:
-        return None  # a 2x2 board leaves nothing to predict a corner from
+    wr, wc = 3, 3   # a corner is predicted from its 3x3 neighbourhood (Board has at least 3x3 corners)
     worst, worst_i = 0.0, -1
     for r in range(board.rows):
         r0 = min(max(r - 1, 0), board.rows - wr)

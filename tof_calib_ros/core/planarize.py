@@ -3,8 +3,9 @@
 The white squares' depth is less noisy than the black squares' (more returned light), and
 the board is a plane. So: segment the white squares from the detected corners (the outer
 ones too, through the board homography), keep their inner part, drop invalid pixels and
-pixels on a steep depth gradient (flying pixels), back-project them, fit the plane by
-RANSAC + SVD, and read each corner's depth where its viewing ray meets that plane.
+pixels on a steep depth gradient (flying pixels), back-project them, find the outliers by
+RANSAC + SVD (the paper's fit), fit the plane to the rest by least squares in depth (where the
+noise is), and read each corner's depth where its viewing ray meets that plane.
 
 Beyond the paper, ``squares="all"`` fits the plane to the whole board, each colour weighted
 by its own noise: for sensors that read both colours at the same range. Real ToF cameras
@@ -38,8 +39,7 @@ class Plane:
     covariance: np.ndarray  # 3x3, of coef
     sigma: float            # std of the white-square inliers' depth about the plane, metres
     pixels: np.ndarray      # (M, 2) integer pixel coordinates (x, y) of the inliers
-    inliers: np.ndarray     # (n_candidates,) bool
-    n_candidates: int       # white-square pixels with valid depth before RANSAC
+    inliers: np.ndarray     # bool, over the samples the plane was fitted to (RANSAC's outliers False)
 
     @property
     def normal(self) -> np.ndarray:
@@ -253,17 +253,13 @@ def _colour_noise(r: np.ndarray, black: np.ndarray) -> np.ndarray:
     return np.maximum(sigma, 1e-15)
 
 
-def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, ransac: bool = True,
-                seed: int = 0) -> Plane:
+def fit_samples(samples: DepthSamples, params: np.ndarray, convention: str, seed: int = 0) -> Plane:
     """The board plane through the samples: RANSAC in 3D against outliers (flying pixels,
-    multipath), then the least-squares fit in depth; without RANSAC, for re-fits on samples
-    already cleaned of outliers, only the latter."""
+    multipath), then the least-squares fit in depth."""
     u = directions(samples.pixels, params, convention)
-    if not ransac:
-        return fit_plane_to(u, samples.depth, samples.pixels, samples.black)
     inliers = on_surface(u, samples.depth, ransac_inliers(u * samples.depth[:, None], np.random.default_rng(seed)))
     plane = fit_plane_to(u[inliers], samples.depth[inliers], samples.pixels[inliers], samples.black[inliers])
-    plane.inliers, plane.n_candidates = inliers, len(u)
+    plane.inliers = inliers
     return plane
 
 
@@ -271,7 +267,7 @@ def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray, 
     """The least-squares plane in depth through samples along known directions (``black``:
     which lie on black squares)."""
     coef, cov, sigma = _fit_depth_plane(directions, depth, black)
-    return Plane(coef, cov, sigma, pixels.astype(int), np.ones(len(depth), dtype=bool), len(depth))
+    return Plane(coef, cov, sigma, pixels.astype(int), np.ones(len(depth), dtype=bool))
 
 
 def off_plane(plane: Plane, directions: np.ndarray, depth: np.ndarray, black: np.ndarray,
@@ -370,7 +366,7 @@ def planarize(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Bo
               seed: int = 0, squares: str = "white") -> tuple[np.ndarray, Plane]:
     """Denoised depth at each corner (metres, the given convention) and the fitted plane."""
     samples = board_samples(depth, corners, ids, board, params, amplitude, margin, squares)
-    plane = fit_samples(samples, params, convention, True, seed)
+    plane = fit_samples(samples, params, convention, seed)
     return corner_depth(plane, corners, params, convention)[0], plane
 
 

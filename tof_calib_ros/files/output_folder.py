@@ -56,7 +56,7 @@ _LEFTOVER = re.compile(r"\.(?:current|current\.legacy|calibration\.yaml|calibrat
 
 
 def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence[View] | EncodedViews,
-                      camera_name: str, extra: Mapping[str, Any] | None = None, depth_units: float | None = None,
+                      camera_name: str, extra: Mapping[str, Any] | None = None,
                       report: Callable[[Path], object] | None = None) -> Path:
     """Write a new calibration set into ``directory`` and make it current; returns the YAML's path.
 
@@ -67,7 +67,7 @@ def write_calibration(directory: str | os.PathLike, result: Any, views: Sequence
     """
     out = Path(directory).expanduser()
     text = camera_yaml(result, camera_name)
-    encoded = views if isinstance(views, EncodedViews) else encode_views(views, depth_units)
+    encoded = views if isinstance(views, EncodedViews) else encode_views(views)
     token = f"{os.getpid()}.{secrets.token_hex(4)}"
     generations = out / GENERATIONS
     staging = generations / f"{_STAGING}{token}"

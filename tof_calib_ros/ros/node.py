@@ -280,7 +280,7 @@ class CalibrationNode(Node):
             with self._lock:
                 todo = self.collector.unsharpened()[:1]
             for key, amplitude, quick in todo:
-                found = accurate_detect(amplitude, self.board, quick, self.collector.config.detect_in_region)
+                found = accurate_detect(amplitude, self.board, quick)
                 with self._lock:
                     dropped = self.collector.sharpen({key: found})
                 for reason in dropped:
