@@ -77,6 +77,17 @@ class Board:
         pts[:, 1] = (idx // self.cols) * self.square
         return pts
 
+    def outline(self, border: float, per_edge: int = 16) -> np.ndarray:
+        """Points along the outline ``border`` squares beyond the interior corners, on the board
+        plane (edges are sampled because distortion bends them): 1 is the squared area's edge."""
+        sq = self.square
+        x0, x1 = -border * sq, (self.cols - 1 + border) * sq
+        y0, y1 = -border * sq, (self.rows - 1 + border) * sq
+        s = np.linspace(0.0, 1.0, per_edge, endpoint=False)
+        xs = np.r_[x0 + (x1 - x0) * s, np.full_like(s, x1), x1 - (x1 - x0) * s, np.full_like(s, x0)]
+        ys = np.r_[np.full_like(s, y0), y0 + (y1 - y0) * s, np.full_like(s, y1), y1 - (y1 - y0) * s]
+        return np.column_stack([xs, ys, np.zeros_like(xs)])
+
     def in_squared_area(self, x: np.ndarray, y: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """True where board-plane points (metres) lie on the squares, at least ``margin`` (a
         fraction of a square) inside the pattern's outline."""

@@ -18,9 +18,9 @@ from . import depth_bias as bias_model
 from .camera import depth_of, split_intrinsics, transform_views
 from .errors import CalibrationError
 from .inputs import Prepared
-from .options import DISTORTION_TERMS, CalibrationOptions, Model
+from .options import CalibrationOptions, Model
 from .planarize import DepthSamples, Plane, corner_depth_along, directions, fit_plane_to
-from .result import MAX_CORNER_DEPTH_DISAGREEMENT, corners_pulled, noise_per_dof
+from .result import MAX_CORNER_DEPTH_DISAGREEMENT, corners_pulled, lens_noise, noise_per_dof
 from .traditional import calibrate_opencv
 from .view_planes import MIN_SQUARE_PIXELS, PlaneSamples
 
@@ -35,10 +35,6 @@ MIN_DISTANCE_SPREAD = 0.05  # views whose distances spread less (relative) are a
 STRUCTURE_P = 0.001  # the F-test's false-alarm rate for a depth error that follows the distance
 BOWL_SIGMAS = 3.0  # a radial intercept this many standard errors from 0 (pooled, or view by view at the same
 #                   false-alarm rate): the depth error is not planar in z
-
-
-def _pixel_noise(fit: bundle.Fit, model: Model) -> tuple[float, int]:
-    return noise_per_dof(fit.pixel_residuals, 4 + len(DISTORTION_TERMS.get(model.distortion, [])))
 
 
 def _one_distance(z: np.ndarray) -> bool:
@@ -189,7 +185,7 @@ def why_yield(observations: list[bundle.Observations], fit: bundle.Fit, free: li
     where it need not), and the fit's fold estimates where they were needed to tell."""
     if corners is None:
         return None, None
-    noise = _pixel_noise(fit, model)
+    noise = lens_noise(fit.pixel_residuals, model.distortion)
     if corners_pulled(noise, corners.noise, tested=False):
         return (f"the corners fit worse with the depth at its full weight than alone ({noise[0]:.3f} against "
                 f"{corners.noise[0]:.3f} px a degree of freedom"), None

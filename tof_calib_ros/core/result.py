@@ -57,6 +57,11 @@ def noise_per_dof(pixel_residuals: list[np.ndarray], n_intrinsics: int) -> tuple
     return (float(np.sqrt(np.sum(r ** 2) / dof)) if dof > 0 else float("nan")), int(dof)
 
 
+def lens_noise(pixel_residuals: list[np.ndarray], distortion: str) -> tuple[float, int]:
+    """``noise_per_dof`` with the camera's four terms and the lens model ``distortion``'s estimated."""
+    return noise_per_dof(pixel_residuals, 4 + len(DISTORTION_TERMS.get(distortion, [])))
+
+
 Focal = tuple[float, float, float, float]   # fx, fy and their standard deviations
 
 
@@ -98,7 +103,7 @@ class CalibrationResult:
     depth_convention: str
     K: np.ndarray
     D: np.ndarray
-    depth_bias: np.ndarray        # [offset (m), scale, tilt_x, tilt_y, wiggle sin, cos (m)], see core.depth_bias
+    depth_bias: np.ndarray        # offset (m), scale, tilt_x, tilt_y, wiggle sin, cos (m), radial (m): core.depth_bias
     std: dict[str, float]         # stated: the noise's, raised to the views' jackknife spread where that is larger
     views: list[ViewReport]
     rejected: dict[int, str] = field(default_factory=dict)
@@ -136,8 +141,7 @@ class CalibrationResult:
     @property
     def pixel_noise(self) -> tuple[float, int]:
         """The pixel noise per degree of freedom (px) and those degrees, with the lens model taken."""
-        return noise_per_dof([v.pixel_residuals for v in self.views],
-                             4 + len(DISTORTION_TERMS.get(self.model.distortion, [])))
+        return lens_noise([v.pixel_residuals for v in self.views], self.model.distortion)
 
     @property
     def verdict(self) -> list[str]:

@@ -343,9 +343,11 @@ def _section_parameters(result: CalibrationResult) -> str:
             continue   # a depth bias term neither estimated nor set
         k = SHOWN_SCALE.get(name, 1.0)
         rows.append([_e(name), _num(values[name] * k, _decimals(s * k)), _std(s * k), _e(UNITS.get(name, ""))])
-    return ("<p>Each value to the second significant digit of its standard deviation (from the Jacobian at "
-            "the solution, scaled by the residual variance, poses marginalised). It assumes independent "
-            "errors, so it is a lower bound when errors are systematic: the cross-validation below tells.</p>"
+    return ("<p>Each value to the second significant digit of its stated standard deviation: the noise's "
+            "(from the Jacobian at the solution, scaled by the residual variance, poses marginalised), "
+            "raised to the spread of the refits without each run of views where that is larger, and to the "
+            "move of the camera's terms under pixels weighted alike where the noise does not explain it. "
+            "What no view reached it does not see: the coverage and cross-validation below tell.</p>"
             + _table("parameters", ["parameter", "value", "± std", "unit"], rows))
 
 
@@ -534,20 +536,11 @@ def _pixel_map(xs: np.ndarray, ys: np.ndarray, values: np.ndarray, outlined: np.
     return fig, ax
 
 
-def _board_outline(board: Board, per_edge: int = 1) -> np.ndarray:
-    """The outer edge of the squared area (one square beyond the interior corners), on the board plane."""
-    s = board.square
-    c = np.array([[-s, -s], [board.cols * s, -s], [board.cols * s, board.rows * s], [-s, board.rows * s]])
-    t = np.linspace(0, 1, per_edge, endpoint=False)[:, None]
-    edges = [c[k] + t * (c[(k + 1) % 4] - c[k]) for k in range(4)]
-    return np.column_stack([np.concatenate(edges), np.zeros(4 * per_edge)])
-
-
 def _section_poses(data: list[_ViewData], result: CalibrationResult, board: Board) -> str:
     fig = _new_figure(7.5, 6.5)
     ax = fig.add_subplot(projection="3d")
     ax.computed_zorder = False   # the view labels stay on top of the boards
-    outline = _board_outline(board)
+    outline = board.outline(1, per_edge=1)
     allpts = [np.zeros((1, 3))]
     for c, rep in zip(_colours(len(data)), result.views):
         X = transform(rep.rvec, rep.tvec, outline)[0]
@@ -587,7 +580,7 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
     except CalibrationError as exc:
         return f'<p class="note">View {d.index} cannot be planarized again: {_e(exc)}</p>'
     # As the calibration does: RANSAC against outliers, then the plane in bias-corrected depth.
-    inl = samples.subset(fit_samples(samples, intr, conv, ransac=True).inliers)
+    inl = samples.subset(fit_samples(samples, intr, conv).inliers)
     u = directions(inl.pixels, intr, conv)
     plane = fit_plane_to(u, bias_model.true_depth(bias, inl.depth, u, period), inl.pixels, inl.black)
 
@@ -599,7 +592,7 @@ def _section_planarization(data: list[_ViewData], result: CalibrationResult, boa
 
     w, h = result.image_size
     rep = result.views[j]
-    outline = project(transform(rep.rvec, rep.tvec, _board_outline(board, 24))[0], intr).pixels
+    outline = project(transform(rep.rvec, rep.tvec, board.outline(1, per_edge=24))[0], intr).pixels
     mask = np.zeros((h, w), np.uint8)
     cv2.fillPoly(mask, [np.round(outline).astype(np.int32)], 1)
     ys, xs = np.nonzero(mask)

@@ -28,7 +28,10 @@ from ..core.board import Board
 from ..core.errors import CalibrationError
 
 RngLike = np.random.Generator | int | None
-
+# ``render``'s scene unless told otherwise (``sim.bound`` describes the same scene): the white
+# margin in squares, the far wall (m), the sub-samples a pixel side, and the albedos of the white
+# squares, the black ones and the wall.
+BORDER, BACKGROUND, SUPERSAMPLE, REFLECTIVITY = 1.0, 3.0, 4, (0.9, 0.1, 0.05)
 
 
 @dataclass(frozen=True)
@@ -230,8 +233,8 @@ def _intersect(x: np.ndarray, y: np.ndarray, R: np.ndarray, t: np.ndarray):
 
 def render(camera: SimCamera, board: Board, rvec: np.ndarray, tvec: np.ndarray, *,
            convention: str = "z", noise: Noise | None = None, rng: RngLike = None,
-           border: float = 1.0, background: float | None = 3.0, flying_pixels: bool = True,
-           supersample: int = 4, reflectivity: tuple[float, float, float] = (0.9, 0.1, 0.05),
+           border: float = BORDER, background: float | None = BACKGROUND, flying_pixels: bool = True,
+           supersample: int = SUPERSAMPLE, reflectivity: tuple[float, float, float] = REFLECTIVITY,
            gain: float = 0.6, dtype: type = np.uint16, invalid: float = np.nan,
            moving_to: tuple[np.ndarray, np.ndarray] | None = None) -> Frame:
     """Render the board at pose (rvec, tvec) (board frame -> camera frame, metres).
@@ -452,18 +455,6 @@ def _sense(camera: SimCamera, board: Board, pose: tuple[np.ndarray, np.ndarray],
                  coverage=cov.astype(np.float32))
 
 
-def board_outline(board: Board, border: float, per_edge: int = 16) -> np.ndarray:
-    """Points along the outline of the board ``border`` squares beyond the interior corners
-    (edges are sampled because distortion bends them)."""
-    sq = board.square
-    x0, x1 = -border * sq, (board.cols - 1 + border) * sq
-    y0, y1 = -border * sq, (board.rows - 1 + border) * sq
-    s = np.linspace(0.0, 1.0, per_edge, endpoint=False)
-    xs = np.r_[x0 + (x1 - x0) * s, np.full_like(s, x1), x1 - (x1 - x0) * s, np.full_like(s, x0)]
-    ys = np.r_[np.full_like(s, y0), y0 + (y1 - y0) * s, np.full_like(s, y1), y1 - (y1 - y0) * s]
-    return np.column_stack([xs, ys, np.zeros_like(xs)])
-
-
 def in_view(camera: SimCamera, points: np.ndarray, margin_px: float = 0.0) -> bool:
     """True when all camera-frame points are in front of the camera and project at least
     ``margin_px`` inside the image. Points beyond the field of view are rejected even when the
@@ -501,7 +492,7 @@ def random_poses(camera: SimCamera, board: Board, n: int, rng: RngLike = None, *
         raise CalibrationError(f"distance range must be positive and ordered, got {distance}")
     if not (0 <= max_tilt_deg < 90):
         raise CalibrationError(f"max tilt must be in [0, 90) degrees, got {max_tilt_deg}")
-    outline = board_outline(board, view_border)
+    outline = board.outline(view_border)
     centre = np.array([(board.cols - 1) / 2 * board.square, (board.rows - 1) / 2 * board.square, 0])
     W, H = camera.width, camera.height
     poses: list[tuple[np.ndarray, np.ndarray]] = []

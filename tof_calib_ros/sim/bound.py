@@ -25,14 +25,14 @@ import numpy as np
 from ..core import camera as cam
 from ..core.board import Board
 from ..core.errors import CalibrationError
-from . import Noise, SimCamera, _surfaces
+from . import BACKGROUND, BORDER, REFLECTIVITY, SUPERSAMPLE, Noise, SimCamera, _surfaces
 
 # The depth error terms a bound may leave unknown: a column each (two for the wiggle's amplitude and
 # phase; ``period``, the wiggle's period, for a method not told the modulation frequency).
 DEPTH_TERMS = ("offset", "black", "wiggle", "period")
 POSE = 6
 SINGULAR = 1e-12   # relative eigenvalue below which the views do not fix a combination of the unknowns
-WHITE = 0.9        # ``render``'s white albedo, which its noise and dark offset are relative to
+WHITE = REFLECTIVITY[0]   # ``render``'s white albedo, which its noise and dark offset are relative to
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,8 @@ def depth_pixels(scene: Scene, rvec: np.ndarray, tvec: np.ndarray) -> tuple[np.n
     """The pixels the board wholly fills at a pose (x, y), the standard deviation ``render``
     draws their depth with, and how far each reads as a dark square does (0 white, 1 black)."""
     noise = scene.noise
-    amp, depth, cov, albedo = _surfaces(scene.camera, scene.board, rvec, tvec, scene.convention, 1.0, 3.0, True, 4,
-                                        (WHITE, 0.1, 0.05))
+    amp, depth, cov, albedo = _surfaces(scene.camera, scene.board, rvec, tvec, scene.convention, BORDER, BACKGROUND,
+                                        True, SUPERSAMPLE, REFLECTIVITY)
     v, u = np.nonzero((cov >= 1.0) & np.isfinite(depth) & (amp > 0))
     sigma = np.sqrt(noise.depth_const ** 2 + noise.depth ** 2 * WHITE / amp[v, u])
     return np.column_stack([u, v]).astype(float), sigma, 1 - albedo[v, u] / WHITE

@@ -142,7 +142,7 @@ def render_frames(scene: Scene) -> Iterator[tuple[sim.Frame, dict]]:
     camera, board = scene.sim_camera, scene.board
     rng = np.random.default_rng(scene.seed)
     noise = sim.Noise(depth=0.004, offset=scene.depth_offset, amplitude=0.002, invalid_fraction=0.002)
-    outline = sim.board_outline(board, WHOLE_EDGE_SQUARES)
+    outline = board.outline(WHOLE_EDGE_SQUARES)
     absent = (np.zeros(3), np.array([0.0, 0.0, 100.0]))   # far behind the wall: not seen
     for start, end in exposures(scene, rng):
         pose = absent if start is None else start
