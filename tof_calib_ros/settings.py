@@ -92,9 +92,9 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
             "centre ('radial', raw PMD)", flag="--depth-convention", choices=DEPTH_CONVENTIONS),
     Setting("depth.scale", 0.001, "metres per count of integer (16UC1) depth; 0.001: millimetres",
             flag="--depth-scale", low=1e-6, high=10.0),
-    Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, and "
-            "tilt, wiggle and radial offset where the data call for them), none, or offset, scale, tilt, wiggle, "
-            "radial joined by + (radial: z-depth only)",
+    Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, "
+            "and scale, tilt, wiggle and radial offset where the data call for them), none, or offset, scale, tilt, "
+            "wiggle, radial joined by + (radial: z-depth only)",
             flag="--depth-bias", check=_depth_model),
     Setting("depth.modulation_mhz", 0.0, "the ToF camera's modulation frequency, MHz: given, the depth model always "
             "estimates a wiggling error of period c / (8 f) (1.87 m at 20 MHz); 0: not known, the data choose the "

@@ -5,7 +5,7 @@
 2. planarize each view's depth at its corners (``view_planes``);
 3. update K (and the depth offset) until the squares have their true size in 3D,
    re-planarizing with each new K;
-4. re-initialise the poses from the 3D corners and update the distortion;
+4. re-initialise the poses from the 3D corners (the distortion is chosen in step 5);
 5. the joint LM over pixel and depth residuals, each view weighted by its own variances,
    with the depth bias estimated alongside (beyond the paper: real ToF depth is offset), in
    the model the data call for (``model_choice``, ``wiggle_search``), the depth's weight
@@ -238,7 +238,7 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
     for v in prepared:
         try:
             smp = board_samples(v.depth, v.corners, v.ids, board, intr, v.amplitude, squares=sampled)
-            plane = fit_samples(smp.subset(~smp.black), intr, convention, ransac=True)
+            plane = fit_samples(smp.subset(~smp.black), intr, convention)
             offset = black_offset(smp, plane, intr, convention)
             if offset is not None:
                 black_offsets.append(offset)
@@ -267,7 +267,7 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
     for k, smp in enumerate(samples):
         if smp is not None:
             if squares == "all":
-                samples[k] = smp.subset(fit_samples(smp, intr, convention, ransac=True).inliers)
+                samples[k] = smp.subset(fit_samples(smp, intr, convention).inliers)
             else:
                 samples[k] = smp.subset(~smp.black).subset(white_inliers[k])
     return PlaneSamples(samples, width), squares, squares_reason

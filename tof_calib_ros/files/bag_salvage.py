@@ -280,7 +280,7 @@ _INT_BYTES = {1: 1, 2: 2, 3: 3, 4: 4, 5: 6, 6: 8}
 
 
 def _record(payload: bytes, length: int, with_blob: bool) -> list:
-    """The column values of a record; a blob or text beyond ``payload`` (not read) as its length."""
+    """The column values of a record; a blob beyond ``payload`` (not read), unless ``with_blob``, as its length."""
     header, i = _varint(payload, 0)
     types = []
     while i < header:

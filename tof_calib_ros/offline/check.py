@@ -84,7 +84,7 @@ def load_calibration(yaml_path: str | Path) -> Calibration:
     if sidecar.is_file():
         try:
             doc = json.loads(sidecar.read_text())
-            # the wiggle's terms are absent from files written before the model had them
+            # the terms added later (the wiggle's, the radial offset) are absent from older files
             bias = np.array([float(doc["depth_bias"].get(name, 0.0) if name in bias_model.TERMS_ADDED_LATER
                                    else doc["depth_bias"][name]) for name in bias_model.NAMES])
             convention = doc["depth_convention"]

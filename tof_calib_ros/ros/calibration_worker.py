@@ -2,8 +2,8 @@
 
 The node keeps receiving frames while it calibrates. In one process, handling them takes
 Python's GIL from the calibration: under a 45 pairs/s stream a calibration took a seventh longer
-than with no stream. In its own process it runs at full speed (its threads on every core), and a crash
-in a numerical library ends the worker, not the node with its views.
+than with no stream. In its own process it has a core to itself (one thread: ``core.threads``),
+and a crash in a numerical library ends the worker, not the node with its views.
 """
 from __future__ import annotations
 
@@ -33,8 +33,6 @@ def _watch_parent(pid: int) -> None:
 
 
 def _init(parent: int) -> None:
-    # All the cores' threads, unlike a replay's workers: the node's view worker drops frames while
-    # a calibration runs, and one thread made a 47-view calibration 45 % slower.
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
 
 
