@@ -85,8 +85,8 @@ def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, 
     bx, by = on_board[:, 0], on_board[:, 1]
     white = board.is_white(bx, by, margin)
     turned = False
-    if amplitude is not None:
-        other = board.is_white(bx + s, by, margin)
+    if amplitude is not None:   # the squares labelled black, where the amplitude says they are white
+        other = board.is_black(bx, by, margin)
         a = amplitude[pix[:, 1].astype(int), pix[:, 0].astype(int)].astype(float)
         if white.any() and other.any() and np.nanmedian(a[other]) > np.nanmedian(a[white]):
             white, turned = other, True
