@@ -59,6 +59,7 @@ from tof_calib_ros.collect.tracking import BoardTracker, quick_locate
 from tof_calib_ros.files.calibration_file import load_views
 from tof_calib_ros.files.image_decode import decode_image, depth_to_metres
 from tof_calib_ros.files.output_folder import write_calibration
+from tof_calib_ros.sim import stream
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BOARD = Board(5, 7, 0.03)
@@ -156,16 +157,14 @@ def _image(array: np.ndarray, encoding: str):
 
 def render_pool(camera: sim.SimCamera, n_poses: int, seed: int = 0) -> list:
     """(amplitude, depth) Image pairs, in stream order: each pose held still, then the way to the
-    next (a cycle). Poses, noise and gain as tof_sim_node's."""
+    next (a cycle): tof_sim_node's camera (``sim.stream``)."""
     rng = np.random.default_rng(seed)
-    f = camera.width / 200 * 0.4
-    poses = sim.random_poses(camera, BOARD, n_poses, rng, distance=(f, 2.2 * f), max_tilt_deg=40)
-    noise = sim.Noise(depth=0.004, offset=0.02, amplitude=0.002, invalid_fraction=0.002)
+    poses = stream.poses(camera, BOARD, n_poses, rng)
+    sensor = stream.noise(0.02)
 
     def pair(rvec: np.ndarray, tvec: np.ndarray) -> tuple:
-        frame = sim.render(camera, BOARD, rvec, tvec, noise=noise, rng=rng, gain=0.3, background=3.0, invalid=0.0)
-        depth_mm = np.clip(np.rint(np.nan_to_num(frame.depth, nan=0.0) * 1000), 0, 65535).astype(np.uint16)
-        return _image(frame.amplitude.astype(np.uint16), "mono16"), _image(depth_mm, "16UC1")
+        frame = stream.frame(camera, BOARD, (rvec, tvec), sensor, rng)
+        return _image(frame.amplitude.astype(np.uint16), "mono16"), _image(stream.depth_mm(frame.depth), "16UC1")
 
     pairs = []
     for (r0, t0), (r1, t1) in zip(poses, poses[1:] + poses[:1]):

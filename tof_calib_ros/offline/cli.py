@@ -31,7 +31,8 @@ from ..files.calibration_file import CalibrationFileError, write_json
 from ..files.image_folder import is_image_folder, scan
 from ..files.output_folder import write_calibration
 from ..settings import LINKED, SETTINGS, calibration_options, collector_config, defaults, refusal
-from ..sim.recording import CAMERA_INFO_MODES, CAMERAS, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
+from ..sim.recording import CAMERA_INFO_MODES, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
+from ..sim.stream import CAMERAS
 from .check import check_views, load_calibration
 
 REJECTED_DIR = "rejected"  # a refused calibration's report and figures, inside --output

@@ -22,6 +22,7 @@ import numpy as np
 
 from .. import sim
 from ..files.calibration_file import read_camera_yaml
+from ..sim.stream import CAMERAS, factory_K
 from .processes import (
     NodeProcess,
     RosProcessError,
@@ -30,7 +31,6 @@ from .processes import (
     ros_environment,
     wait_until,
 )
-from .sim_node import CAMERAS, FACTORY_ERROR
 
 START_TIMEOUT_S = 30.0
 COLLECT_TIMEOUT_S = 240.0
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  success={commit.success}: {commit.message}")
 
         truth = CAMERAS[args.camera]()
-        factory = truth.K * np.array([[FACTORY_ERROR, 1, 1], [1, FACTORY_ERROR, 1], [1, 1, 1]])
+        factory = factory_K(truth)
         result = json.loads((out / "calibration.json").read_text())
         print(f"\n{truth.width}x{truth.height} px, {len(result['views'])} views, pixel RMS "
               f"{result['pixel_rms']:.3f} px, depth RMS {result['depth_rms_m'] * 1e3:.2f} mm\n")

@@ -15,11 +15,11 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 
-from .. import Board, CalibrationError, sim
+from .. import Board, CalibrationError
 from ..files.calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
+from ..sim import stream
 from .run import run
 
-CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 # name: (default, description); all read-only
 PARAMETERS = {
     "camera": ("pmd", "'pmd' (200x200) or 'azure' (640x576)"),
@@ -35,7 +35,6 @@ PARAMETERS = {
     "calibration_file": ("", "where set_camera_info stores the calibration (empty: memory only)"),
     "seed": (0, "random seed of the poses and the noise"),
 }
-FACTORY_ERROR = 1.04  # the published factory focal length is 4 % off, as a miscalibrated driver's
 
 
 class SimCameraNode(Node):
@@ -45,15 +44,13 @@ class SimCameraNode(Node):
             self.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True))
         p = lambda name: self.get_parameter(name).value  # noqa: E731
         self._check(p)
-        self.camera = CAMERAS[p("camera")]()
+        self.camera = stream.CAMERAS[p("camera")]()
         self.board = Board(p("board.cols"), p("board.rows"), p("board.square"))
         self.convention, self.encoding, self.frame_id = p("depth.convention"), p("depth.encoding"), p("frame_id")
         self.hold, self.calibration_file = int(p("hold")), p("calibration_file")
         self.rng = np.random.default_rng(p("seed"))
-        self.noise = sim.Noise(depth=0.004, offset=p("depth.offset"), amplitude=0.002, invalid_fraction=0.002)
-        f = self.camera.width / 200 * 0.4
-        self.poses = sim.random_poses(self.camera, self.board, 200, self.rng, distance=(f, 2.2 * f),
-                                      max_tilt_deg=40)
+        self.noise = stream.noise(p("depth.offset"))
+        self.poses = stream.poses(self.camera, self.board, 200, self.rng)
         self.frame = 0
         self.info = self._factory_info()
         self.amplitude_pub = self.create_publisher(Image, "amplitude", qos_profile_sensor_data)
@@ -67,7 +64,8 @@ class SimCameraNode(Node):
         """Refuse bad parameters with a reason up front, not as a KeyError, a division by zero
         or (an unknown encoding) silently publishing 32FC1."""
         checks = [
-            (p("camera") in CAMERAS, f"camera must be one of {', '.join(CAMERAS)}, not {p('camera')!r}"),
+            (p("camera") in stream.CAMERAS, f"camera must be one of {', '.join(stream.CAMERAS)}, "
+                                            f"not {p('camera')!r}"),
             (p("rate") > 0, f"rate must be positive, not {p('rate')}"),
             (p("hold") >= 1, f"hold must be at least 1 frame, not {p('hold')}"),
             (p("depth.convention") in ("z", "radial"),
@@ -80,23 +78,18 @@ class SimCameraNode(Node):
                 raise CalibrationError(reason)
 
     def _factory_info(self) -> CameraInfo:
-        K = self.camera.K.copy()
-        K[0, 0] *= FACTORY_ERROR
-        K[1, 1] *= FACTORY_ERROR
-        return CameraInfo(**monocular_fields(K, np.zeros(5), self.camera.size))
+        return CameraInfo(**monocular_fields(stream.factory_K(self.camera), np.zeros(5), self.camera.size))
 
     def _tick(self) -> None:
-        rvec, tvec = self.poses[(self.frame // self.hold) % len(self.poses)]
+        pose = self.poses[(self.frame // self.hold) % len(self.poses)]
         self.frame += 1
-        frame = sim.render(self.camera, self.board, rvec, tvec, convention=self.convention, noise=self.noise,
-                           rng=self.rng, gain=0.3, background=3.0, invalid=0.0)
+        frame = stream.frame(self.camera, self.board, pose, self.noise, self.rng, self.convention)
         stamp = self.get_clock().now().to_msg()
         self.amplitude_pub.publish(self._image(frame.amplitude.astype(np.uint16), "mono16", stamp))
-        depth = np.nan_to_num(frame.depth, nan=0.0)
         if self.encoding == "16UC1":
-            depth_msg = self._image(np.clip(np.rint(depth * 1000), 0, 65535).astype(np.uint16), "16UC1", stamp)
+            depth_msg = self._image(stream.depth_mm(frame.depth), "16UC1", stamp)
         else:
-            depth_msg = self._image(depth.astype(np.float32), "32FC1", stamp)
+            depth_msg = self._image(np.nan_to_num(frame.depth, nan=0.0).astype(np.float32), "32FC1", stamp)
         self.depth_pub.publish(depth_msg)
         self.info.header.stamp, self.info.header.frame_id = stamp, self.frame_id
         self.info_pub.publish(self.info)

@@ -29,12 +29,12 @@ from ..core.board import Board
 from ..core.camera import project, transform
 from ..core.errors import CalibrationError
 from ..files.bag_io import BagWriter
+from . import stream
+from .stream import CAMERAS
 
-CAMERAS = {"pmd": sim.pmd_camera, "azure": sim.azure_kinect_camera}
 CAMERA_INFO_MODES = ("factory", "true", "none")
 MOTIONS = ("hold", "continuous")
 DEPTH_ENCODINGS = ("16UC1", "32FC1")
-FACTORY_ERROR = 1.04   # the factory camera_info's focal length is 4 % off, as sim_node's
 TOPICS = {"amplitude": "/tof/amplitude/image_raw", "depth": "/tof/depth/image_raw",
           "camera_info": "/tof/camera_info"}
 FRAME_ID = "tof_optical_frame"
@@ -98,10 +98,9 @@ Pose = tuple[np.ndarray, np.ndarray]
 
 def _key_poses(scene: Scene, rng: np.random.Generator) -> list[Pose]:
     camera, board = scene.sim_camera, scene.board
-    f = camera.width / 200 * 0.4   # sim_node's distances: the board fills a similar part of the image
     n = (scene.frames // (scene.hold + scene.transit) + 2 if scene.motion == "hold"
          else int(scene.frames / scene.rate / scene.segment) + 3)
-    poses = sim.random_poses(camera, board, n, rng, distance=(f, 2.2 * f), max_tilt_deg=40)
+    poses = stream.poses(camera, board, n, rng)
     if scene.motion == "continuous":   # the board comes in from the side: one field of view away
         rvec, tvec = poses[0]
         side = rng.choice([-1.0, 1.0]) * tvec[2] * camera.width / camera.K[0, 0]
@@ -141,13 +140,12 @@ def render_frames(scene: Scene) -> Iterator[tuple[sim.Frame, dict]]:
     "whole", "partial" or "none", ``blur_px`` how far the corners moved during the exposure."""
     camera, board = scene.sim_camera, scene.board
     rng = np.random.default_rng(scene.seed)
-    noise = sim.Noise(depth=0.004, offset=scene.depth_offset, amplitude=0.002, invalid_fraction=0.002)
+    sensor = stream.noise(scene.depth_offset)
     outline = board.outline(WHOLE_EDGE_SQUARES)
     absent = (np.zeros(3), np.array([0.0, 0.0, 100.0]))   # far behind the wall: not seen
     for start, end in exposures(scene, rng):
         pose = absent if start is None else start
-        frame = sim.render(camera, board, *pose, convention=scene.depth_convention, noise=noise, rng=rng,
-                           gain=0.3, background=3.0, invalid=0.0, moving_to=end)
+        frame = stream.frame(camera, board, pose, sensor, rng, scene.depth_convention, end)
         if start is None:
             truth = {"board": "none", "blur_px": 0.0}
         else:
@@ -177,11 +175,7 @@ def published_K(scene: Scene) -> np.ndarray | None:
     """The camera_info's K: the truth, the factory's (focal lengths 4 % off) or none."""
     if scene.camera_info == "none":
         return None
-    K = scene.sim_camera.K.copy()
-    if scene.camera_info == "factory":
-        K[0, 0] *= FACTORY_ERROR
-        K[1, 1] *= FACTORY_ERROR
-    return K
+    return stream.factory_K(scene.sim_camera) if scene.camera_info == "factory" else scene.sim_camera.K.copy()
 
 
 def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
@@ -198,9 +192,8 @@ def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
         for i, (frame, truth) in enumerate(frames):
             per_frame.append({"stamp": START + i / scene.rate, **truth})
             stamp = START + i / scene.rate
-            depth = np.nan_to_num(frame.depth, nan=0.0)
-            depth = (np.clip(np.rint(depth * 1000), 0, 65535).astype(np.uint16) if scene.depth_encoding == "16UC1"
-                     else depth.astype(np.float32))
+            depth = (stream.depth_mm(frame.depth) if scene.depth_encoding == "16UC1"
+                     else np.nan_to_num(frame.depth, nan=0.0).astype(np.float32))
             bag.write(TOPICS["amplitude"], bag.image_message(frame.amplitude, "mono16", stamp, FRAME_ID), stamp)
             bag.write(TOPICS["depth"], bag.image_message(depth, scene.depth_encoding, stamp, FRAME_ID), stamp)
             if K is not None:
