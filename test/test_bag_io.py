@@ -18,6 +18,7 @@ from tof_calib_ros.files.bag_io import (
     BagWriter,
     TopicError,
     choose_topics,
+    stamp_parts,
 )
 
 AMP, DEPTH, INFO = "/tof/amplitude/image_raw", "/tof/depth/image_raw", "/tof/camera_info"
@@ -114,6 +115,21 @@ def test_round_trip_in_every_storage(tmp_path, storage):
         np.testing.assert_allclose(depth, expected_depth * 0.001, rtol=1e-12)
         np.testing.assert_array_equal(frame.amplitude_source().load(), expected_amplitude)   # a worker's part
         assert frame.stamp == pytest.approx(100.0 + 0.1 * i + 0.001, abs=1e-6)   # the depth's stamp
+
+
+def test_a_stamp_whose_nanoseconds_round_to_a_second_carries_it(tmp_path):
+    # Wrapped to 0 without the carry, 1,700,000,000.9999999997 s went back to ...000.0.
+    assert stamp_parts(1_700_000_000.9999999997) == (1_700_000_001, 0)
+    assert stamp_parts(100.25) == (100, 250_000_000) and stamp_parts(7.0) == (7, 0)
+    path = tmp_path / "bag"
+    with BagWriter(path, "sqlite3") as bag:
+        for stamp in (99.9, 99.9999999997):
+            amplitude, depth = _images(0)
+            bag.write(AMP, bag.image_message(amplitude, "mono16", stamp, "tof"), stamp)
+            bag.write(DEPTH, bag.image_message(depth, "16UC1", stamp, "tof"), stamp)
+    with BagSource(path) as source:
+        frames, skips = _frames(source)
+    assert skips == [] and [f.stamp for f in frames] == pytest.approx([99.9, 100.0], abs=1e-6)
 
 
 def test_frames_are_paired_by_stamp_and_the_unpaired_counted(tmp_path):

@@ -12,6 +12,7 @@ one on its topic; its image data is checked when decoded (``BagFrame.decode``).
 """
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -31,6 +32,14 @@ from ..core.errors import CalibrationError
 from .bag_salvage import McapSalvage, SqliteSalvage, storage_files
 from .calibration_file import monocular_fields
 from .image_decode import DEPTH_ENCODINGS, ENCODINGS, ImageError, ImageTooLarge, decode_image, depth_to_metres
+
+
+def stamp_parts(stamp: float) -> tuple[int, int]:
+    """A stamp in seconds as a message's (sec, nanosec): the nanoseconds rounded, and carried
+    into the seconds when they round up to a whole one (wrapped to 0, a stamp went back 1 s)."""
+    sec = math.floor(stamp)
+    nanosec = round((stamp - sec) * 1e9)
+    return (sec + 1, 0) if nanosec >= 1_000_000_000 else (sec, nanosec)
 
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
@@ -373,8 +382,8 @@ class BagWriter:
         return self.typestore.types[name]
 
     def header(self, stamp: float, frame_id: str) -> Any:
-        sec = int(np.floor(stamp))
-        time = self._types("builtin_interfaces/msg/Time")(sec=sec, nanosec=int(round((stamp - sec) * 1e9)) % 10**9)
+        sec, nanosec = stamp_parts(stamp)
+        time = self._types("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec)
         if self.storage == "ros1":
             return self._types("std_msgs/msg/Header")(seq=0, stamp=time, frame_id=frame_id)
         return self._types("std_msgs/msg/Header")(stamp=time, frame_id=frame_id)

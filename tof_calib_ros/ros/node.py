@@ -42,7 +42,7 @@ from ..collect.collector import Outcome, ViewCollector
 from ..collect.replay import Replay, Summary
 from ..collect.stamp_sync import StampSync
 from ..collect.tracking import BoardTracker, accurate_detect
-from ..files.bag_io import BagError, BagFrame, BagSource
+from ..files.bag_io import BagError, BagFrame, BagSource, stamp_parts
 from ..files.calibration_file import EncodedViews, encode_views, monocular_fields
 from ..files.image_decode import ImageError, decode_image, depth_to_metres
 from ..files.image_folder import is_image_folder, scan
@@ -307,8 +307,7 @@ class CalibrationNode(Node):
         picture = draw(amplitude, outcome, progress)
         msg = Image(height=picture.shape[0], width=picture.shape[1], encoding="bgr8", is_bigendian=0,
                     step=picture.shape[1] * 3, data=picture.tobytes())
-        msg.header.stamp.sec = int(stamp)
-        msg.header.stamp.nanosec = min(int(round((stamp - int(stamp)) * 1e9)), 999_999_999)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = stamp_parts(stamp)
         msg.header.frame_id = self.frame_id
         self.picture_pub.publish(msg)
 

@@ -249,7 +249,7 @@ def play(node: Any, namespace: str, bag: Path, rate: float, procs: tuple[NodePro
     from sensor_msgs.msg import Image
 
     from ..collect.replay import Skip
-    from ..files.bag_io import BagSource
+    from ..files.bag_io import BagSource, stamp_parts
 
     pubs = [node.create_publisher(Image, f"{namespace}/{topic}", qos_profile_sensor_data)
             for topic in ("amplitude", "depth")]
@@ -265,7 +265,8 @@ def play(node: Any, namespace: str, bag: Path, rate: float, procs: tuple[NodePro
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
-                stamp = Time(sec=int(frame.stamp), nanosec=int(round(frame.stamp % 1 * 1e9)) % 1_000_000_000)
+                sec, nanosec = stamp_parts(frame.stamp)
+                stamp = Time(sec=sec, nanosec=nanosec)
                 for pub, fields in zip(pubs, (frame.amplitude, frame.depth)):
                     msg = Image(height=fields.height, width=fields.width, encoding=fields.encoding,
                                 is_bigendian=fields.is_bigendian, step=fields.step)
