@@ -28,10 +28,11 @@ from ..collect.collector import AXES, ViewCollector
 from ..collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from ..files.bag_io import STORAGES, BagError, BagSource, TopicError
 from ..files.calibration_file import CalibrationFileError, write_json
+from ..files.image_decode import DEPTH_ENCODINGS
 from ..files.image_folder import is_image_folder, scan
 from ..files.output_folder import write_calibration
 from ..settings import LINKED, SETTINGS, calibration_options, collector_config, defaults, refusal
-from ..sim.recording import CAMERA_INFO_MODES, DEPTH_ENCODINGS, MOTIONS, Scene, write_recording
+from ..sim.recording import CAMERA_INFO_MODES, MOTIONS, Scene, write_recording
 from ..sim.stream import CAMERAS
 from .check import check_views, load_calibration
 

@@ -17,6 +17,7 @@ from sensor_msgs.srv import SetCameraInfo
 
 from .. import Board, CalibrationError
 from ..files.calibration_file import CalibrationFileError, monocular_fields, write_camera_yaml
+from ..files.image_decode import DEPTH_ENCODINGS
 from ..sim import stream
 from .run import run
 
@@ -70,8 +71,8 @@ class SimCameraNode(Node):
             (p("hold") >= 1, f"hold must be at least 1 frame, not {p('hold')}"),
             (p("depth.convention") in ("z", "radial"),
              f"depth.convention must be 'z' or 'radial', not {p('depth.convention')!r}"),
-            (p("depth.encoding") in ("16UC1", "32FC1"),
-             f"depth.encoding must be '16UC1' or '32FC1', not {p('depth.encoding')!r}"),
+            (p("depth.encoding") in DEPTH_ENCODINGS,
+             f"depth.encoding must be one of {', '.join(DEPTH_ENCODINGS)}, not {p('depth.encoding')!r}"),
         ]
         for ok, reason in checks:
             if not ok:

@@ -29,12 +29,12 @@ from ..core.board import Board
 from ..core.camera import project, transform
 from ..core.errors import CalibrationError
 from ..files.bag_io import BagWriter
+from ..files.image_decode import DEPTH_ENCODINGS
 from . import stream
 from .stream import CAMERAS
 
 CAMERA_INFO_MODES = ("factory", "true", "none")
 MOTIONS = ("hold", "continuous")
-DEPTH_ENCODINGS = ("16UC1", "32FC1")
 TOPICS = {"amplitude": "/tof/amplitude/image_raw", "depth": "/tof/depth/image_raw",
           "camera_info": "/tof/camera_info"}
 FRAME_ID = "tof_optical_frame"
