@@ -40,7 +40,7 @@ from ..core.board import Board
 from ..core.detection import Detection
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres, depth_units
-from ..core.planarize import sample_depth
+from ..core.planarize import sample_depth, svd_plane
 from .motion import edge_blur_px, edge_depth_error
 from .tracking import accurate_detect, quick_locate
 
@@ -412,9 +412,7 @@ def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) 
     ok = np.isfinite(a) & np.isfinite(r) & (r > 0) & (a > 0)
     f = float(np.sqrt(np.median(a[ok] / r[ok]))) if ok.sum() >= 3 else float(w)
     valid = np.isfinite(z)
-    points = np.column_stack([p[valid] * z[valid, None] / f, z[valid]])
-    q = points - points.mean(axis=0)
-    normal = np.linalg.eigh(q.T @ q)[1][:, 0]
+    normal, _ = svd_plane(np.column_stack([p[valid] * z[valid, None] / f, z[valid]]))
     return float(np.degrees(np.arccos(min(abs(normal[2]), 1.0))))
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from .camera import points_from_depth, rays, split_intrinsics
 from .errors import CalibrationError
@@ -111,11 +112,8 @@ def pose_from_points(object_points: np.ndarray, points: np.ndarray) -> np.ndarra
     ok = np.all(np.isfinite(points), axis=1)
     a, b = object_points[ok], points[ok]
     ca, cb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
-    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ S @ U.T
-    t = cb - R @ ca
-    return np.r_[cv2.Rodrigues(R)[0].ravel(), t]
+    R = Rotation.align_vectors(b - cb, a - ca)[0]
+    return np.r_[R.as_rotvec(), cb - R.apply(ca)]
 
 
 def pose_from_pixels(object_points: np.ndarray, pixels: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:

@@ -122,7 +122,7 @@ def ransac_inliers(points: np.ndarray, rng: np.random.Generator, iterations: int
     """Points on the dominant plane: RANSAC over point triples, then SVD refits at 3 sigma (a
     consensus, which ``on_surface`` refines)."""
     n = len(points)
-    normal, offset = _svd_plane(points)
+    normal, offset = svd_plane(points)
     d0 = points @ normal - offset
     tau = 3 * max(1.4826 * np.median(np.abs(d0 - np.median(d0))), 1e-9)
     tri = rng.integers(0, n, size=(iterations, 3))
@@ -139,7 +139,7 @@ def ransac_inliers(points: np.ndarray, rng: np.random.Generator, iterations: int
         if best.sum() < 3:
             best = np.ones(n, dtype=bool)
     for _ in range(3):
-        normal, offset = _svd_plane(points[best])
+        normal, offset = svd_plane(points[best])
         dist = points @ normal - offset
         sigma = max(1.4826 * np.median(np.abs(dist[best])), 1e-12)
         best = np.abs(dist) < 3 * sigma
@@ -171,8 +171,9 @@ def _cubic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.column_stack([x ** i * y ** j for i in range(4) for j in range(4 - i)])
 
 
-def _svd_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
-    """Total least squares plane (unit normal, offset): geometric, for the outlier search only."""
+def svd_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Total least squares plane (unit normal, offset): geometric, for the outlier search and
+    rough tilts only (the fit is in depth, where the noise is)."""
     centroid = points.mean(0)
     q = points - centroid
     normal = np.linalg.eigh(q.T @ q)[1][:, 0]

@@ -47,12 +47,10 @@ def _unit_rays(pixels: np.ndarray, params: np.ndarray) -> np.ndarray:
 
 
 def _rotation(va: np.ndarray, vb: np.ndarray) -> np.ndarray:
-    """The rotation R that best takes the unit rays ``va`` onto ``vb`` (Wahba's problem, solved by
-    the SVD), over the pairs both models give."""
+    """The rotation R that best takes the unit rays ``va`` onto ``vb`` (Wahba's problem), over the
+    pairs both models give."""
     ok = np.isfinite(va).all(axis=1) & np.isfinite(vb).all(axis=1)
-    U, _, Vt = np.linalg.svd(va[ok].T @ vb[ok])
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    return Rotation.align_vectors(vb[ok], va[ok])[0].as_matrix()
 
 
 class _From(NamedTuple):
