@@ -2,6 +2,7 @@
 start ROS processes are in ros/, with their fixtures."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -14,3 +15,26 @@ def kinect_dir() -> Path:
     if not KINECT_DIR.is_dir():
         pytest.skip(f"real Kinect v2 data not found at {KINECT_DIR} (the shared/ folder beside the checkout)")
     return KINECT_DIR
+
+
+# In CI nothing may be skipped: the real data and the ROS wheels are there, and a test skipped
+# for want of them would leave the run green with that part of the product untested.
+_skipped: list[str] = []
+
+
+def pytest_collectreport(report: pytest.CollectReport) -> None:
+    if report.skipped:
+        _skipped.append(f"{report.nodeid}: {report.longrepr}")
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.skipped and not hasattr(report, "wasxfail"):
+        _skipped.append(f"{report.nodeid}: {report.longrepr}")
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if os.environ.get("CI") == "true" and _skipped and exitstatus == 0:
+        reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+        for line in [f"{len(_skipped)} skipped, which CI does not allow:", *_skipped]:
+            reporter.write_line(line)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
