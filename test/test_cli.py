@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -216,16 +217,14 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
     # with the depth half a pixel off the IR). kinect_real's 49 views at 0.4 put cy at 80.06 against
     # the full-resolution 199.11 scaled, 79.34, since the depth yields to what its model leaves
     # open (83.30 before); the folder's 48 views (a partial board left out) take a depth scale and
-    # the yield does not move them: the issue's principal-point target (issue 12), reported as an
-    # expected failure where it is missed, after the checks above. Since the stated uncertainty is
-    # jackknifed over runs of consecutive views (2026-11-29), the tolerance of 3 combined sigmas
-    # holds it: the test passes
+    # the yield does not move them. Since the stated uncertainty is jackknifed over runs of
+    # consecutive views (2026-11-29), the tolerance of 3 combined sigmas holds it (it was reported
+    # as an expected failure before; a plain check now, so that a regression fails)
     std = doc["std"]
     for k, name in enumerate(("cx", "cy")):
         tol = max(3.0, 3 * np.hypot(std[name], full_std[name] * s))
         off = abs(K[k, 2] - ((full[k, 2] + 0.5) * s - 0.5))
-        if off >= tol:
-            pytest.xfail(f"{name} {off:.2f} px from the full-resolution calibration's, scaled (tolerance {tol:.2f})")
+        assert off < tol, f"{name} {off:.2f} px from the full-resolution calibration's, scaled (tolerance {tol:.2f})"
 
 
 @pytest.mark.slow
@@ -425,10 +424,12 @@ def test_a_failed_quality_check_exits_7_and_leaves_the_earlier_calibration(bags,
     assert after == before   # every earlier file as it was, none added
     assert json.loads((tmp_path / "rejected" / "calibration.json").read_text())["verdict"]["ok"] is False
     assert (tmp_path / "rejected" / "report.html").is_file()
-    # the next good run replaces the calibration and clears the refusal's report
+    # the next good run replaces the calibration (a new generation) and clears the refusal's report
+    earlier = os.readlink(tmp_path / "current")
     code, _, err = run(capsys, "bag", bags["sqlite3"], *BOARD, "--output", tmp_path)
     assert code == EXIT_OK, err
-    assert not (tmp_path / "rejected").exists() and read_camera_yaml(tmp_path / "calibration.yaml").K[0, 0] > 0
+    assert not (tmp_path / "rejected").exists() and os.readlink(tmp_path / "current") != earlier
+    assert read_camera_yaml(tmp_path / "calibration.yaml").K[0, 0] == pytest.approx(284.4, rel=0.01)
 
 
 def test_other_errors_exit_1(bags, capsys, tmp_path):

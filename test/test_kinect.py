@@ -119,7 +119,8 @@ def test_few_views_state_uncertainties_the_other_half_of_the_views_bears_out(vie
         pick = np.random.default_rng(k).choice(len(odd), size=5, replace=False)
         res = calibrate([odd[i] for i in pick], BOARD)
         z = (res.K[0, 0] - even.K[0, 0]) / np.hypot(res.std["fx"], even.std["fx"])
-        assert not res.ok or abs(z) < 2, (k, res.K[0, 0], res.std["fx"], even.K[0, 0], z)
+        # trusted or not, the stated sigmas bear the difference out (and a trusted one within 2)
+        assert abs(z) < 3 and (not res.ok or abs(z) < 2), (k, res.K[0, 0], res.std["fx"], even.K[0, 0], z)
 
 
 @pytest.mark.parametrize("draw", [0, 14, 16])
@@ -166,7 +167,7 @@ def test_the_odd_half_takes_a_scale_from_its_bows_and_is_not_trusted_off_the_eve
     assert any("between the views" in r and "a depth scale term" in r for r in odd.model.reasons), odd.model.reasons
     assert abs(odd.K[0, 0] / reference.K[0, 0] - 1) < 0.01, (odd.K[0, 0], reference.K[0, 0])
     z = (odd.K[0, 0] - reference.K[0, 0]) / np.hypot(odd.std["fx"], reference.std["fx"])
-    assert not odd.ok or abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z)
+    assert abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z, odd.ok)   # trusted or not
 
 
 def test_the_halves_agree_within_their_uncertainty(odd, even):
@@ -288,7 +289,8 @@ def test_told_one_of_the_camera_s_frequencies_a_trusted_focal_length_is_within_2
     res = calibrate(views[1::2] if odd else low_views, BOARD, modulation_hz=80e6)
     truth = np.diag(reference.K)[:2] * (1.0 if odd else LOW_SCALE)
     z = (np.diag(res.K)[:2] - truth) / np.array([res.std["fx"], res.std["fy"]])
-    assert not res.ok or np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z, res.model.reasons)
+    # within 2 sigmas, trusted or not (measured -1.0 both, 2026-11-28)
+    assert np.all(np.abs(z) < 2), (np.diag(res.K)[:2], res.std, truth, z, res.ok, res.model.reasons)
 
 
 def test_at_205x170_the_halves_agree_closer_than_opencvs(low, low_views):

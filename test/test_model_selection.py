@@ -43,6 +43,8 @@ def test_the_distortion_terms_the_lens_has(lens, expected):
     res = calibrate(views, BOARD)
     assert res.model.distortion in expected, res.model.reasons
     assert res.K[0, 0] == pytest.approx(F, abs=3 * res.std["fx"] + 0.05)
+    # and not by a wide sigma: trusted, 0.03-0.08 % off, stated +- 0.08-0.11 px (2026-11-29)
+    assert res.ok and abs(res.K[0, 0] / F - 1) < 0.002 and res.std["fx"] < 0.3, (res.K[0, 0], res.std["fx"])
 
 
 @pytest.mark.slow
@@ -52,16 +54,18 @@ def test_four_corners_three_images_with_a_real_lens():
     within 5 of its stated sigmas, and at most one lies beyond 3 (the score test alone, which
     understates a term whose absence inflates the noise, trusted one 2.8 % off at 11 sigmas and
     two beyond 3). An untrusted one says why."""
-    beyond = []
+    beyond, trusted = [], 0
     for seed in range(1, 13):
         res = calibrate(_views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 3, 4, seed), BOARD)
         if not res.ok:
             assert any("poorly constrained" in r for r in res.verdict), res.verdict
             continue
+        trusted += 1
         z = abs(res.K[0, 0] - F) / res.std["fx"]
         assert abs(res.K[0, 0] / F - 1) < 0.02 and z < 5, (seed, res.K[0, 0], res.std["fx"], res.model.reasons)
         beyond += [seed] if z > 3 else []
     assert len(beyond) <= 1, beyond
+    assert trusted >= 6, trusted   # not a pass by refusing: 9 of the 12 trusted (2026-11-29)
 
 
 @pytest.mark.parametrize("depth_tilt, chosen", [((0.0, 0.0), False), ((0.02, -0.015), True)])

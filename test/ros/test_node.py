@@ -96,8 +96,9 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     assert "accepted view" not in node.output() and "accepted as view 1\n" in node.output()   # said once
 
     # Two calibrations at once: both answered; one may be turned away, saying so.
-    for resp in call_together(spinner, "/calibration_node/calibrate", 2, 60.0, *procs):
-        assert resp.success or "already running" in resp.message, resp.message
+    resps = call_together(spinner, "/calibration_node/calibrate", 2, 60.0, *procs)
+    assert all(r.success or "already running" in r.message for r in resps), [r.message for r in resps]
+    assert any(r.success for r in resps), [r.message for r in resps]   # not both turned away
 
     # A calibration that cannot be saved is refused with the reason; the node lives on.
     blocker = tmp_path / "a_file"
