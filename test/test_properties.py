@@ -324,11 +324,17 @@ lengths = st.one_of(st.floats(), st.integers(-2, 2),
 
 @settings(max_examples=300, deadline=None)
 @given(counts, counts, lengths)
+@example(5, 7, 0.03)
+@example(3, 1000, 10.0)
 def test_board_is_valid_or_refused(cols, rows, square):
+    # plainly valid (whole corner counts of 3 to 1000, a float of 1 mm to 10 m) must be taken:
+    # refusing everything would pass the rest of this test
+    plain = all(type(n) is int and 3 <= n <= 1000 for n in (cols, rows)) and type(square) is float \
+        and 1e-3 <= square <= 10.0
     try:
         board = Board(cols, rows, square)
     except CalibrationError as exc:
-        assert str(exc)
+        assert str(exc) and not plain, (cols, rows, square, exc)
         return
     assert type(board.cols) is int and type(board.rows) is int and type(board.square) is float
     assert (board.cols, board.rows) == (cols, rows) and board.square == float(square)
@@ -346,6 +352,8 @@ spans = st.one_of(st.lists(st.floats(), min_size=5, max_size=7).map(tuple), st.s
 
 @settings(max_examples=200, deadline=None, report_multiple_bugs=False)
 @given(st.dictionaries(config_fields, settings_values, max_size=3), st.none() | pairs, st.none() | spans)
+@example({}, None, None)
+@example({"max_views": 50, "min_views": 5}, (0.3, 3.0), None)
 def test_collector_config_is_valid_or_refused(values, depth_range, spans_):
     if depth_range is not None:
         values["depth_range"] = depth_range
@@ -354,8 +362,9 @@ def test_collector_config_is_valid_or_refused(values, depth_range, spans_):
     try:
         config = CollectorConfig(**values)
     except CalibrationError as exc:
-        assert str(exc)
+        assert str(exc) and values, exc   # the defaults must be taken
         return
+    assert all(getattr(config, k) == v for k, v in values.items() if k != "spans"), (values, config)
     counts_ = [config.max_views, config.min_views]
     assert all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in counts_)
     numbers = [config.min_distance, config.exposure_s, config.max_blur_px, config.max_gap_s, config.border_px,
