@@ -66,11 +66,8 @@ def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, 
     if H is None:
         raise CalibrationError("the corners of a view do not form a valid board (degenerate homography)")
     h, w = shape
-    s = board.square
-    outline = np.array([[-s, -s], [board.cols * s, -s], [board.cols * s, board.rows * s],
-                        [-s, board.rows * s]])
     fx, fy, cx, cy = params[:4]
-    on = cv2.perspectiveTransform(outline[None], H)[0]
+    on = cv2.perspectiveTransform(board.outline(1, per_edge=1)[None, :, :2], H)[0]
     # The bounding box of the squared area, from the distortion-free outline, padded.
     px = np.column_stack([on[:, 0] * fx + cx, on[:, 1] * fy + cy])
     pad = 0.1 * (px.max(0) - px.min(0)) + 2
