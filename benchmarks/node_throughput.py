@@ -164,7 +164,8 @@ def render_pool(camera: sim.SimCamera, n_poses: int, seed: int = 0) -> list:
 
     def pair(rvec: np.ndarray, tvec: np.ndarray) -> tuple:
         frame = stream.frame(camera, BOARD, (rvec, tvec), sensor, rng)
-        return _image(frame.amplitude.astype(np.uint16), "mono16"), _image(stream.depth_mm(frame.depth), "16UC1")
+        depth = _image(stream.encoded_depth(frame.depth, "16UC1"), "16UC1")
+        return _image(frame.amplitude.astype(np.uint16), "mono16"), depth
 
     pairs = []
     for (r0, t0), (r1, t1) in zip(poses, poses[1:] + poses[:1]):

@@ -87,11 +87,7 @@ class SimCameraNode(Node):
         frame = stream.frame(self.camera, self.board, pose, self.noise, self.rng, self.convention)
         stamp = self.get_clock().now().to_msg()
         self.amplitude_pub.publish(self._image(frame.amplitude.astype(np.uint16), "mono16", stamp))
-        if self.encoding == "16UC1":
-            depth_msg = self._image(stream.depth_mm(frame.depth), "16UC1", stamp)
-        else:
-            depth_msg = self._image(np.nan_to_num(frame.depth, nan=0.0).astype(np.float32), "32FC1", stamp)
-        self.depth_pub.publish(depth_msg)
+        self.depth_pub.publish(self._image(stream.encoded_depth(frame.depth, self.encoding), self.encoding, stamp))
         self.info.header.stamp, self.info.header.frame_id = stamp, self.frame_id
         self.info_pub.publish(self.info)
 

@@ -192,8 +192,7 @@ def write_recording(path: str | Path, scene: Scene, storage: str = "sqlite3",
         for i, (frame, truth) in enumerate(frames):
             per_frame.append({"stamp": START + i / scene.rate, **truth})
             stamp = START + i / scene.rate
-            depth = (stream.depth_mm(frame.depth) if scene.depth_encoding == "16UC1"
-                     else np.nan_to_num(frame.depth, nan=0.0).astype(np.float32))
+            depth = stream.encoded_depth(frame.depth, scene.depth_encoding)
             bag.write(TOPICS["amplitude"], bag.image_message(frame.amplitude, "mono16", stamp, FRAME_ID), stamp)
             bag.write(TOPICS["depth"], bag.image_message(depth, scene.depth_encoding, stamp, FRAME_ID), stamp)
             if K is not None:

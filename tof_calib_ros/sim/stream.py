@@ -37,6 +37,10 @@ def frame(camera: SimCamera, board: Board, pose: Pose, sensor: Noise, rng: np.ra
                   moving_to=moving_to)
 
 
-def depth_mm(depth: np.ndarray) -> np.ndarray:
-    """16UC1 depth (REP 118: millimetres, 0 where invalid)."""
-    return np.clip(np.rint(np.nan_to_num(depth, nan=0.0) * 1000), 0, 65535).astype(np.uint16)
+def encoded_depth(depth: np.ndarray, encoding: str) -> np.ndarray:
+    """Depth in metres as the camera sends it (REP 118): 16UC1 millimetres or 32FC1 metres,
+    0 where invalid."""
+    metres = np.nan_to_num(depth, nan=0.0)
+    if encoding == "16UC1":
+        return np.clip(np.rint(metres * 1000), 0, 65535).astype(np.uint16)
+    return metres.astype(np.float32)
