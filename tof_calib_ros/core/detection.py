@@ -46,7 +46,7 @@ MAX_UPSCALE = 8
 _FIND_FLAGS = (cv2.CALIB_CB_EXHAUSTIVE, cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
 _ACCURATE_FLAGS = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
 _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
+IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)   # what the detector reads
 # The SB detector draws from OpenCV's random generator (the calling thread's), so the same image
 # gave corners up to 1 px apart by what had been detected before it in the process (a real Kinect
 # v2 view at 205x170, after five others): seeded before each call, as a new process starts it
@@ -70,7 +70,7 @@ def _stretch(image: np.ndarray) -> np.ndarray:
         raise CalibrationError(f"amplitude image must be 2-D (one channel), got shape {image.shape}")
     if image.size == 0:
         raise CalibrationError("amplitude image is empty")
-    if image.dtype.type not in _DTYPES:
+    if image.dtype.type not in IMAGE_DTYPES:
         raise CalibrationError(
             f"amplitude image must be uint8, uint16, int16 or float, got dtype {image.dtype}")
     img = image.astype(np.float64)

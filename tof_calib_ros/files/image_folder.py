@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from ..collect.replay import FrameError, Skip
+from ..core.detection import IMAGE_DTYPES
 from ..core.inputs import depth_in_metres
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
 from .image_decode import ImageTooLarge, check_pixels
@@ -26,7 +27,6 @@ EXTENSIONS = (".png", ".tif", ".tiff", ".npy")
 AMPLITUDE_SUFFIXES = ("ir", "amplitude")
 DEPTH_SUFFIX = "depth"
 _NAME = re.compile(r"(?P<stem>.+)_(?P<kind>[A-Za-z]+)$")
-_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
 
 def _read(path: Path) -> np.ndarray:
@@ -42,7 +42,7 @@ def _read(path: Path) -> np.ndarray:
         raise FrameError("unreadable", f"{path.name}: {type(exc).__name__}: {exc}") from None
     if image is None:
         raise FrameError("unreadable", f"{path.name}: missing or not a readable image")
-    if image.ndim != 2 or image.dtype.type not in _DTYPES:
+    if image.ndim != 2 or image.dtype.type not in IMAGE_DTYPES:
         raise FrameError("encoding", f"{path.name}: {image.dtype} image of shape {image.shape}; need one "
                                      "channel of uint8, uint16, int16 or float")
     return image
