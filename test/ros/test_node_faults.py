@@ -222,7 +222,7 @@ def test_soak_under_load_and_faults(ros, tmp_path):
     assert soak["calls"]["calibrate"]["succeeded"] >= 1, soak["calls"]
     assert all(soak["events"].values()), soak["events"]   # the 300-call burst and the stopped worker
     # bounded: the views (30 of 200x200) and the calibrations' working memory, not the stream
-    first, full, end = soak["memory MB (first, after views full, end)"]
+    first, full, end = soak["memory MB (first; median once views full, at end)"]
     assert end < 600 and end - full < 50, soak
 
 
