@@ -275,6 +275,15 @@ def test_saved_views_in_png_tiff_and_npy_calibrate(tmp_path, capsys):
     assert doc["camera_matrix"][0][0] == pytest.approx(camera.K[0, 0], rel=0.01)
     assert doc["collection"]["frames"] == 14 and doc["collection"]["skipped"] == {"unreadable": 1}
     assert "no depth image beside 0099_ir.png" in out
+    # the long steps show the stages they reach on stderr, in order, as they reach them
+    stages = [line for line in err.splitlines() if line.startswith(("calibrating 14 views (", "writing the report ("))]
+    assert stages[0].endswith("): 14 of 14 views have a board") and "): traditional calibration: fx=" in stages[1], err
+    assert any("): chosen by the data: distortion" in line for line in stages), err
+    assert [line.split("): ", 1)[1] for line in stages if line.startswith("writing")] == [
+        "the traditional calibration of the same 14 views", "the first half of the views alone (7)",
+        "the second half of the views alone (7)", "drawing the figures"], err
+    writing = [line.startswith("writing") for line in stages]
+    assert writing == sorted(writing) and "calibrating" not in out   # the report after the calibration
 
 
 # -- broken messages ----------------------------------------------------------------------------

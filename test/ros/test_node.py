@@ -94,11 +94,16 @@ def test_simulator_calibration_and_commit(launch, spinner, tmp_path):
     keys = [v.key for v in status.values]
     assert status.level == DiagnosticStatus.OK and "last rejection" in keys and "last_reason" not in keys, keys
     assert "accepted view" not in node.output() and "accepted as view 1\n" in node.output()   # said once
+    assert "calibrating: traditional calibration: fx=" in node.output()   # each stage logged as reached
 
     # Two calibrations at once: both answered; one may be turned away, saying so.
     resps = call_together(spinner, "/calibration_node/calibrate", 2, 60.0, *procs)
     assert all(r.success or "already running" in r.message for r in resps), [r.message for r in resps]
     assert any(r.success for r in resps), [r.message for r in resps]   # not both turned away
+    # the diagnostics (1 Hz) showed the stage of the calibration, which takes seconds, while it ran
+    wait_until(lambda: any(s.message.startswith("calibrating ") and "views (" in s.message for s in statuses), 5.0,
+               lambda: f"diagnostics showing a running calibration (saw {[s.message for s in statuses][-5:]})",
+               *procs)
 
     # A calibration that cannot be saved is refused with the reason; the node lives on.
     blocker = tmp_path / "a_file"

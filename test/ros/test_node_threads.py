@@ -9,11 +9,13 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 wheels are not installed (pip install .[ros,test])")
 
+from rclpy.parameter import Parameter  # noqa: E402
 from ros_helpers import wait_until  # noqa: E402
 
-from tof_calib_ros import sim  # noqa: E402
+from tof_calib_ros import View, calibrate, sim  # noqa: E402
 from tof_calib_ros.collect import tracking  # noqa: E402
 from tof_calib_ros.ros import node as node_module  # noqa: E402
+from tof_calib_ros.ros.calibration_worker import CalibrationWorker  # noqa: E402
 
 
 def test_the_worker_leaves_a_kept_view_s_accurate_corners_to_the_sharpening_thread(ros, monkeypatch):
@@ -43,5 +45,54 @@ def test_the_worker_leaves_a_kept_view_s_accurate_corners_to_the_sharpening_thre
             views = node.collector.views
         assert all(np.array_equal(v.corners, d.corners) for v, (_, d) in zip(views, found))
         assert len(found) == 3   # reading the views found nothing more
+    finally:
+        node.destroy_node()
+
+
+def _frames(board, n: int, seed: int):
+    camera, rng = sim.pmd_camera(), np.random.default_rng(seed)
+    noise = sim.Noise(depth=0.003, offset=0.02)
+    return [sim.render(camera, board, *pose, noise=noise, rng=rng)
+            for pose in sim.random_poses(camera, board, n, rng, distance=(0.4, 0.9), max_tilt_deg=40)]
+
+
+def test_the_worker_passes_on_the_stages_calibrate_reaches_and_only_its_own_call_s(ros):
+    from tof_calib_ros import Board
+
+    board = Board(5, 7, 0.03)
+    views = [View(f.depth, f.corners) for f in _frames(board, 8, 3)]
+    worker = CalibrationWorker()
+    try:
+        for some in (views, views[:6]):   # a second call hears none of the first's
+            here: list[str] = []
+            expected = calibrate(some, board, progress=here.append)
+            there: list[str] = []
+            result = worker.calibrate(some, board, progress=there.append)
+            assert there == here and len(here) >= 4, (there, here)
+            np.testing.assert_array_equal(result.K, expected.K)
+    finally:
+        worker.close()
+
+
+def test_the_diagnostics_show_a_running_calibration_s_stage_then_its_result(ros, tmp_path):
+    node = node_module.CalibrationNode(context=ros[1], parameter_overrides=[
+        Parameter("views.min", value=8), Parameter("output_dir", value=str(tmp_path))])
+    try:
+        for i, f in enumerate(_frames(node.board, 8, 5)):
+            node._judge(f.amplitude, f.depth, float(i), node._generation, thorough=True)
+        n = len(node.collector)
+        assert n >= 8 and not node.status().message.startswith("calibrat")
+        seen: list[str] = []
+        answer: list = []
+        calibration = threading.Thread(target=lambda: answer.append(node._calibrate()))
+        calibration.start()
+        while calibration.is_alive():   # as the 1 Hz diagnostics would, only more often
+            seen.append(node.status().message)
+            calibration.join(0.05)
+        assert answer[0][0], answer
+        running = [m for m in seen if m.startswith(f"calibrating {n} views (")]
+        assert any("s): traditional calibration: fx=" in m for m in running), seen
+        assert len({m.split("): ", 1)[1] for m in running}) >= 3, seen   # the stage moves on as it runs
+        assert node.status().message.startswith("calibrated (fx=")
     finally:
         node.destroy_node()

@@ -133,6 +133,14 @@ class Progress:
             self._bar.close()
 
 
+def stages(what: str) -> Callable[[str], None]:
+    """A line on stderr for each stage a long step reaches, with the seconds since it began: a
+    calibration takes seconds to minutes (about 20 s for 50 views at 512x424) and its report as
+    long again."""
+    start = time.monotonic()
+    return lambda stage: print(f"{what} ({time.monotonic() - start:.0f} s): {stage}", file=sys.stderr, flush=True)
+
+
 # -- the shared steps -------------------------------------------------------------------------
 def _board(args: argparse.Namespace) -> Board:
     return Board(args.size[0], args.size[1], args.square)
@@ -220,7 +228,8 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
     t0 = time.monotonic()
     options = calibration_options(_values(args))
     try:
-        result = calibrate(views, board, summary.image_size, **options)
+        result = calibrate(views, board, summary.image_size, **options,
+                           progress=stages(f"calibrating {len(views)} views"))
     except CalibrationError as exc:
         raise Failure(EXIT_ERROR, f"calibration failed: {exc}") from None
     print("calibration: " + result.summary(len(views), time.monotonic() - t0))
@@ -256,7 +265,8 @@ def _calibrate_and_write(args: argparse.Namespace, board: Board, summary: Summar
 def _write_report(path: Path, views, board: Board, result, title: str) -> Path:
     """The report of ``result`` (which calibrates again with the options ``result`` records)."""
     from .report import write_report  # matplotlib is imported only when a report is written
-    return write_report(path, views, board, result, title=f"tof_calib: {title}")
+    return write_report(path, views, board, result, title=f"tof_calib: {title}",
+                        progress=stages("writing the report"))
 
 
 # -- commands ---------------------------------------------------------------------------------

@@ -120,9 +120,8 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
     fixed = result.options.fixed(result.model).to_dict()
     options = {k: fixed[k] for k in ("depth_units", "depth_bias", "distortion", "loss", "plane_squares",
                                      "modulation_hz")}
-    say("report: calibrating again with the other method and with each half of the views")
-    comparison = _compare(views, data, board, result, options)
-    say("report: drawing the figures")
+    comparison = _compare(views, data, board, result, options, say)
+    say("drawing the figures")
     sections = [
         ("summary", "Verdict and summary", _section_summary(result, views, options, comparison)),
         ("parameters", "Parameters", _section_parameters(result)),
@@ -137,7 +136,6 @@ def write_report(path, views: Sequence[View], board: Board, result: CalibrationR
     ]
     page = _page(title or f"ToF calibration report ({result.image_size[0]}x{result.image_size[1]})", sections)
     out = atomic_write(path, page.encode("utf-8"))
-    say(f"report: wrote {out}")
     return out
 
 
@@ -183,17 +181,19 @@ def _calibrate(views: list[View], board: Board, result: CalibrationResult, metho
 
 
 def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result: CalibrationResult,
-             options: dict) -> _Comparison:
+             options: dict, say: Callable[[str], None]) -> _Comparison:
     # The used views with their corners as the result has them: nothing is detected again, and
     # corners a robust fit dropped stay out.
     known = {d.index: View(views[d.index].depth, d.measured, d.ids, views[d.index].amplitude) for d in data}
     used = [d.index for d in data]
     same_lens = None
     if result.method == "depth":   # the baseline as ROS camera_calibration runs it, whatever lens ours chose
+        say(f"the traditional calibration of the same {len(used)} views")
         other = _calibrate([known[i] for i in used], board, result, "traditional", {**options, "distortion": "auto"})
         if not isinstance(other, str) and other.model.distortion != result.model.distortion:
             same_lens = _calibrate([known[i] for i in used], board, result, "traditional", options)
     else:   # a traditional result says nothing of the depth model: the depth method's defaults
+        say(f"the depth-aided calibration of the same {len(used)} views")
         other = _calibrate([known[i] for i in used], board, result, "depth",
                            {k: result.options.to_dict()[k] for k in ("depth_units", "loss")})
     half_views = (used[:len(used) // 2], used[len(used) // 2:])
@@ -201,8 +201,11 @@ def _compare(views: Sequence[View], data: list[_ViewData], board: Board, result:
         return _Comparison(other, None, half_views,
                            f"skipped: the calibration used {len(used)} views; a cross-validation needs at least "
                            f"{MIN_CV_VIEWS} (three a half)", same_lens)
-    halves = tuple(_calibrate([known[i] for i in idx], board, result, result.method, options) for idx in half_views)
-    return _Comparison(other, halves, half_views, same_lens=same_lens)
+    halves = []
+    for which, idx in zip(("first", "second"), half_views):
+        say(f"the {which} half of the views alone ({len(idx)})")
+        halves.append(_calibrate([known[i] for i in idx], board, result, result.method, options))
+    return _Comparison(other, (halves[0], halves[1]), half_views, same_lens=same_lens)
 
 
 def _half_ratios(result: CalibrationResult, comparison: _Comparison) -> list[tuple[str, float, float, float]] | None:

@@ -3,15 +3,20 @@
 The node keeps receiving frames while it calibrates. In one process, handling them takes
 Python's GIL from the calibration: under a 45 pairs/s stream a calibration took a seventh longer
 than with no stream. In its own process it has a core to itself (one thread: ``core.threads``),
-and a crash in a numerical library ends the worker, not the node with its views.
+and a crash in a numerical library ends the worker, not the node with its views. The stages
+it reaches come back as they are reached, through a pipe of its own, for the node's log and
+diagnostics: a calibration takes seconds (about 20 s for 50 views at 512x424).
 """
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import Connection
 from typing import Any
 
 from ..collect.replay import worker_context
@@ -20,6 +25,9 @@ from ..core.pipeline import calibrate
 from ..core.result import CalibrationResult
 
 PARENT_CHECK_S = 1.0
+PROGRESS_POLL_S = 0.1   # how often the node looks for the worker's answer between its stages
+
+_stages: Connection | None = None   # in the worker: where the stages a calibration reaches go
 
 
 def _watch_parent(pid: int) -> None:
@@ -32,8 +40,17 @@ def _watch_parent(pid: int) -> None:
             os._exit(0)
 
 
-def _init(parent: int) -> None:
+def _init(parent: int, stages: Connection) -> None:
+    global _stages
+    _stages = stages
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+
+
+def _calibrate(call: int, *args: Any, **kwargs: Any) -> CalibrationResult:
+    """``calibrate`` with each stage it reaches sent as it is reached, marked with the call it is
+    of. Sent at once, not by a thread as a multiprocessing queue would: the last stage is in the
+    pipe before the answer."""
+    return calibrate(*args, progress=lambda stage: _stages.send((call, stage)), **kwargs)
 
 
 def _ready() -> bool:
@@ -45,17 +62,32 @@ class CalibrationWorker:
     calibration does not wait for it; started anew if it ends."""
 
     def __init__(self) -> None:
+        self._calls = itertools.count()
         self._start()
 
     def _start(self) -> None:
-        self._pool = ProcessPoolExecutor(1, mp_context=worker_context(), initializer=_init, initargs=(os.getpid(),))
+        # A pipe for each worker: one killed while it wrote would leave half a message in it.
+        context = worker_context()
+        self._stages, sender = context.Pipe(duplex=False)
+        self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_init, initargs=(os.getpid(), sender))
         self._pool.submit(_ready)
 
-    def calibrate(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> CalibrationResult:
-        """``tof_calib_ros.calibrate`` in the worker; raises what it raises. A worker that has
-        not answered in ``timeout`` seconds (stopped, or stuck) is killed and replaced."""
+    def calibrate(self, *args: Any, timeout: float | None = None, progress: Callable[[str], None] | None = None,
+                  **kwargs: Any) -> CalibrationResult:
+        """``tof_calib_ros.calibrate`` in the worker; raises what it raises. ``progress`` gets
+        the stages the calibration reaches, in this thread, as they are reached. A worker that
+        has not answered in ``timeout`` seconds (stopped, or stuck) is killed and replaced. One
+        call at a time."""
+        call = next(self._calls)
         try:
-            return self._pool.submit(calibrate, *args, **kwargs).result(timeout=timeout)
+            future = self._pool.submit(_calibrate, call, *args, **kwargs)
+            deadline = None if timeout is None else time.monotonic() + timeout
+            while not future.done():
+                if deadline is not None and time.monotonic() > deadline:
+                    raise TimeoutError
+                self._relay(call, progress, PROGRESS_POLL_S)
+            self._relay(call, progress, 0.0)   # the stages sent just before the answer
+            return future.result()
         except BrokenProcessPool:
             self._restart()
             raise CalibrationError("the calibration's worker process ended (killed, or a crash in a numerical "
@@ -65,6 +97,15 @@ class CalibrationWorker:
             raise CalibrationError(f"the calibration's worker process did not answer in {timeout:g} s (stopped "
                                    "or stuck; calibration.timeout); it was killed and a new one started: "
                                    "call again") from None
+
+    def _relay(self, call: int, progress: Callable[[str], None] | None, wait: float) -> None:
+        """Pass on the stages sent so far, waiting up to ``wait`` for the first; those of an
+        earlier call (one that timed out) are dropped."""
+        while self._stages.poll(wait):
+            wait = 0.0
+            of, stage = self._stages.recv()
+            if of == call and progress is not None:
+                progress(stage)
 
     def _restart(self, kill: bool = False) -> None:
         if kill:

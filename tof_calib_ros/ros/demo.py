@@ -43,13 +43,15 @@ def _progress_printer(latest: dict):
         for status in msg.status:
             if status.name.startswith("/calibration_node"):
                 values = {kv.key: kv.value for kv in status.values}
+                if status.message.startswith("calibrating") and status.message != latest.get("stage"):
+                    print(f"  ({status.message})", flush=True)   # the stage a running calibration is at
                 if values.get("views") != latest.get("views"):
                     coverage = " ".join(f"{k.split('.')[1]} {v}" for k, v in values.items()
                                         if k.startswith("coverage."))
                     print(f"  views {values.get('views')}  (frames {values.get('frames')}; coverage {coverage})",
                           flush=True)
                 latest.clear()
-                latest.update(values)
+                latest.update(values, stage=status.message)
     return on_diagnostics
 
 

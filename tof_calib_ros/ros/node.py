@@ -137,6 +137,7 @@ class CalibrationNode(Node):
         self.paired = 0
         self.last_problem = ""
         self.bag_topics: dict[str, str] = {}   # the bag's, when replaying one
+        self.calibrating: tuple[float, int, str] | None = None   # (start, views, stage) while a calibration runs
 
         qos = qos_profile_sensor_data
         if p("qos.reliable"):
@@ -391,11 +392,13 @@ class CalibrationNode(Node):
                 return False, self._too_few(len(views), need)
             t0 = time.monotonic()
             encoded = self._encoder.submit(encode_views, views)   # the files, while the worker calibrates
+            self.calibrating = (t0, len(views), "starting")
+            self.get_logger().info(f"calibrating {len(views)} views")
             try:
                 result = self._calibrator.calibrate(views, self.board,
                                                     (views[0].depth.shape[1], views[0].depth.shape[0]),
                                                     timeout=self._param("calibration.timeout"),
-                                                    **calibration_options(self._values()))
+                                                    progress=self._on_stage, **calibration_options(self._values()))
             except CalibrationError as exc:
                 return False, f"calibration failed: {exc}"
             except Exception as exc:  # noqa: BLE001 - an exception here would end the node and its views
@@ -413,7 +416,14 @@ class CalibrationNode(Node):
             self.get_logger().info(message)
             return True, message
         finally:
+            self.calibrating = None
             self._calibrating.release()
+
+    def _on_stage(self, stage: str) -> None:
+        """A stage the running calibration reached: logged, and shown by the diagnostics."""
+        if self.calibrating is not None:
+            self.calibrating = (*self.calibrating[:2], stage)
+        self.get_logger().info(f"calibrating: {stage}")
 
     def _too_few(self, n: int, need: int) -> str:
         """Why there are too few views, starting from the first thing missing."""
@@ -485,12 +495,24 @@ class CalibrationNode(Node):
 
     # -- progress ----------------------------------------------------------------------------
     def _publish_diagnostics(self) -> None:
+        msg = DiagnosticArray(status=[self.status()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
+
+    def status(self) -> DiagnosticStatus:
+        """What the diagnostics say: a running calibration's stage, else the last result, else
+        how the collection stands; and the counts behind it."""
         with self._lock:
             progress = self.collector.progress()
         # the fully qualified name tells two cameras' calibration nodes apart
         status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: view collection",
                                   hardware_id=self.frame_id)
-        if self.result is not None:
+        running = self.calibrating
+        if running is not None:
+            start, n, stage = running
+            status.level = DiagnosticStatus.OK
+            status.message = f"calibrating {n} views ({time.monotonic() - start:.0f} s): {stage}"
+        elif self.result is not None:
             status.level = DiagnosticStatus.OK
             status.message = (f"calibrated (fx={self.result.K[0, 0]:.2f} fy={self.result.K[1, 1]:.2f}, "
                               f"{len(self.result.views)} views); still collecting")
@@ -505,9 +527,7 @@ class CalibrationNode(Node):
         values["last rejection"] = self.last_problem
         status.values = [KeyValue(key=str(k), value=f"{v:.2f}" if isinstance(v, float) else str(v))
                          for k, v in values.items()]
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag_pub.publish(msg)
+        return status
 
     def destroy_node(self) -> None:
         with self._wake:
