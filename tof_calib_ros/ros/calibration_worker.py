@@ -66,10 +66,12 @@ class CalibrationWorker:
         self._start()
 
     def _start(self) -> None:
-        # A pipe for each worker: one killed while it wrote would leave half a message in it.
+        # A pipe for each worker: one killed while it wrote would leave half a message in it. Its
+        # sending end stays open here too, so a worker's end is told by the pool, not the pipe.
         context = worker_context()
-        self._stages, sender = context.Pipe(duplex=False)
-        self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_init, initargs=(os.getpid(), sender))
+        self._stages, self._sender = context.Pipe(duplex=False)
+        self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_init,
+                                         initargs=(os.getpid(), self._sender))
         self._pool.submit(_ready)
 
     def calibrate(self, *args: Any, timeout: float | None = None, progress: Callable[[str], None] | None = None,
