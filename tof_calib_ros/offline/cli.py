@@ -135,7 +135,7 @@ class Progress:
 
 def stages(what: str) -> Callable[[str], None]:
     """A line on stderr for each stage a long step reaches, with the seconds since it began: a
-    calibration takes seconds to minutes (about 20 s for 50 views at 512x424) and its report as
+    calibration takes seconds to minutes (17 s for 48 views at 512x424) and its report as
     long again."""
     start = time.monotonic()
     return lambda stage: print(f"{what} ({time.monotonic() - start:.0f} s): {stage}", file=sys.stderr, flush=True)

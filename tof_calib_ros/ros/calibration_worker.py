@@ -5,7 +5,7 @@ Python's GIL from the calibration: under a 45 pairs/s stream a calibration took 
 than with no stream. In its own process it has a core to itself (one thread: ``core.threads``),
 and a crash in a numerical library ends the worker, not the node with its views. The stages
 it reaches come back as they are reached, through a pipe of its own, for the node's log and
-diagnostics: a calibration takes seconds (about 20 s for 50 views at 512x424).
+diagnostics: a calibration takes seconds (17 s for 48 views at 512x424).
 """
 from __future__ import annotations
 
