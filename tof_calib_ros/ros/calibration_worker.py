@@ -9,7 +9,6 @@ diagnostics: a calibration takes seconds (17 s for 48 views at 512x424).
 """
 from __future__ import annotations
 
-import itertools
 import os
 import threading
 import time
@@ -46,11 +45,11 @@ def _init(parent: int, stages: Connection) -> None:
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
 
 
-def _calibrate(call: int, *args: Any, **kwargs: Any) -> CalibrationResult:
-    """``calibrate`` with each stage it reaches sent as it is reached, marked with the call it is
-    of. Sent at once, not by a thread as a multiprocessing queue would: the last stage is in the
-    pipe before the answer."""
-    return calibrate(*args, progress=lambda stage: _stages.send((call, stage)), **kwargs)
+def _calibrate(*args: Any, **kwargs: Any) -> CalibrationResult:
+    """``calibrate`` with each stage it reaches sent as it is reached. Sent at once, not by a
+    thread as a multiprocessing queue would: the last stage is in the pipe before the answer, so
+    none is left for the next call to hear."""
+    return calibrate(*args, progress=_stages.send, **kwargs)
 
 
 def _ready() -> bool:
@@ -62,12 +61,12 @@ class CalibrationWorker:
     calibration does not wait for it; started anew if it ends."""
 
     def __init__(self) -> None:
-        self._calls = itertools.count()
         self._start()
 
     def _start(self) -> None:
-        # A pipe for each worker: one killed while it wrote would leave half a message in it. Its
-        # sending end stays open here too, so a worker's end is told by the pool, not the pipe.
+        # A pipe for each worker: one killed (a timed-out call's) would leave half a message or a
+        # stage of its call in it. Its sending end stays open here too, so a worker's end is told
+        # by the pool, not the pipe.
         context = worker_context()
         self._stages, self._sender = context.Pipe(duplex=False)
         self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_init,
@@ -80,15 +79,14 @@ class CalibrationWorker:
         the stages the calibration reaches, in this thread, as they are reached. A worker that
         has not answered in ``timeout`` seconds (stopped, or stuck) is killed and replaced. One
         call at a time."""
-        call = next(self._calls)
         try:
-            future = self._pool.submit(_calibrate, call, *args, **kwargs)
+            future = self._pool.submit(_calibrate, *args, **kwargs)
             deadline = None if timeout is None else time.monotonic() + timeout
             while not future.done():
                 if deadline is not None and time.monotonic() > deadline:
                     raise TimeoutError
-                self._relay(call, progress, PROGRESS_POLL_S)
-            self._relay(call, progress, 0.0)   # the stages sent just before the answer
+                self._relay(progress, PROGRESS_POLL_S)
+            self._relay(progress, 0.0)   # the stages sent just before the answer
             return future.result()
         except BrokenProcessPool:
             self._restart()
@@ -100,13 +98,12 @@ class CalibrationWorker:
                                    "or stuck; calibration.timeout); it was killed and a new one started: "
                                    "call again") from None
 
-    def _relay(self, call: int, progress: Callable[[str], None] | None, wait: float) -> None:
-        """Pass on the stages sent so far, waiting up to ``wait`` for the first; those of an
-        earlier call (one that timed out) are dropped."""
+    def _relay(self, progress: Callable[[str], None] | None, wait: float) -> None:
+        """Pass on the stages sent so far, waiting up to ``wait`` for the first."""
         while self._stages.poll(wait):
             wait = 0.0
-            of, stage = self._stages.recv()
-            if of == call and progress is not None:
+            stage = self._stages.recv()
+            if progress is not None:
                 progress(stage)
 
     def _restart(self, kill: bool = False) -> None:
