@@ -113,8 +113,8 @@ def joint(prepared, plane_samples, obj, observations, state, free, options: Cali
         fit = bundle.solve(observations, state, convention, free, loss=options.loss,
                            wiggle_period=options.wiggle_period)
         state = fit.state
-        say(f"joint fit: fx={state.intrinsics[0]:.3f} fy={state.intrinsics[1]:.3f} "
-            f"offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
+        say(f"joint fit, round {round_ + 1}: fx={state.intrinsics[0]:.3f} "
+            f"fy={state.intrinsics[1]:.3f} offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
         depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, state.intrinsics,
                                                                  state.bias, convention, options.wiggle_period,
                                                                  radial_may_enter(options))
@@ -172,9 +172,11 @@ def _without_k3(prepared, plane_samples, obj, observations, fit: bundle.Fit, fre
     state = fit.state.copy()
     state.intrinsics[K3] = 0.0
     fewer = [t for t in free if t != K3]
+    say(f"with k3 the lens folds back {folds:.0f} px from the principal point: fitting without k3 to compare")
     alt, depths, planes, observations = joint(prepared, plane_samples, obj, observations, state, fewer, options, say)
     alt_folds = fold_distance(alt.state.intrinsics, image_size)
     if alt_folds is not None and alt_folds <= folds:
+        say(f"k3 kept: without it the lens folds back nearer still ({alt_folds:.0f} px)")
         return None
     model.distortion = "plumb_bob"
     model.evidence.setdefault("full", {})["folds_at_px"] = round(folds, 1)
