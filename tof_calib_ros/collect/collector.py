@@ -48,6 +48,16 @@ AXES = ("x", "y", "size", "skew", "depth", "tilt")
 # Small values are no achievement on these axes (camera_calibration: size and skew), so their
 # range starts at 0 and only their largest value counts.
 _FROM_ZERO = {"size", "skew", "tilt"}
+# What the person holding the board does to cover each axis further: camera_calibration's bars
+# say how far each is, not how to fill it.
+WHAT_TO_DO = {
+    "x": "move the board across the image, left to right",
+    "y": "move it from the image's top to its bottom",
+    "size": "bring it nearer, to fill more of the image",
+    "skew": "tilt it about a diagonal, so its corners are not square in the image",
+    "depth": "hold it at more distances, near and far",
+    "tilt": "tilt it further towards or away from the camera",
+}
 # The outline checked against the image border lies this many squares beyond the outer corners:
 # a corner is located from the squares around it, so those must be in the image too.
 EDGE_SQUARES = 0.5
@@ -250,6 +260,12 @@ class ViewCollector:
         good = len(params) >= cfg.min_views and all(a["progress"] >= 1.0 for a in axes.values())
         return {"axes": axes, "frames": self._frames, "views": len(params),
                 "last_reason": self._last_reason, "good_enough": good}
+
+    def still_short(self) -> str:
+        """The two axes the kept views cover least of those not yet full, each with what to do
+        about it; empty when all are full."""
+        short = sorted((a["progress"], name) for name, a in self.progress()["axes"].items() if a["progress"] < 1.0)
+        return "; ".join(f"{name} {share:.0%}: {WHAT_TO_DO[name]}" for share, name in short[:2])
 
     def _judge(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float, found: Detection,
                detected: Detection | None) -> Outcome:

@@ -441,8 +441,9 @@ class CalibrationNode(Node):
                 return head + (f"{self.received[0]} amplitude and {self.received[1]} depth frames arrived but none "
                                f"pair: their header stamps differ by more than sync.slop "
                                f"({self._param('sync.slop'):g} s)")
-        return head + ("move the board to new positions, distances and tilts (last rejection: "
-                       f"{self.last_problem or 'none'})")
+        with self._lock:
+            short = self.collector.still_short()
+        return head + f"{short or 'move the board to new positions'} (last rejection: {self.last_problem or 'none'})"
 
     def _write(self, result: CalibrationResult, views: EncodedViews) -> None:
         # what it takes to recalibrate from views/ or to trace the result back to its source
@@ -504,6 +505,7 @@ class CalibrationNode(Node):
         how the collection stands; and the counts behind it."""
         with self._lock:
             progress = self.collector.progress()
+            short, need = self.collector.still_short(), self.collector.config.min_views
         # the fully qualified name tells two cameras' calibration nodes apart
         status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: view collection",
                                   hardware_id=self.frame_id)
@@ -518,7 +520,9 @@ class CalibrationNode(Node):
                               f"{len(self.result.views)} views); still collecting")
         else:
             status.level = DiagnosticStatus.OK if progress["good_enough"] else DiagnosticStatus.WARN
-            status.message = "enough views to calibrate" if progress["good_enough"] else "collecting views"
+            status.message = "enough views to calibrate" if progress["good_enough"] else (
+                f"collecting views ({progress['views']} of at least {need})"
+                + (f": {short}" if short else ""))
         values = {k: v for k, v in progress.items() if not isinstance(v, dict) and k != "last_reason"}
         values["frames received (amplitude, depth)"] = f"{self.received[0]}, {self.received[1]}"
         values.update({f"coverage.{k}": a["progress"] for k, a in progress["axes"].items()})
