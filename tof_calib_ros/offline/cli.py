@@ -207,6 +207,9 @@ def _require_views(summary: Summary, collector: ViewCollector, board: Board, vie
                                                                                 summary.skipped)):
             if counts:
                 why.append(f"{what}: " + ", ".join(f"{reason} ({c})" for reason, c in counts.most_common(3)))
+        short = collector.still_short()
+        if short:   # what a new recording should do
+            why.append(f"the views kept are short of {short}")
         raise Failure(EXIT_TOO_FEW_VIEWS, f"only {n} views collected, need {views_min} "
                                           "(--views-min); " + "; ".join(why))
 
