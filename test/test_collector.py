@@ -417,3 +417,20 @@ def test_the_board_picture_rings_a_corner_under_the_reason_text(accepted):
         ring = picture[y - k - 3:y + k + 4, x - k - 3:x + k + 4].astype(int)
         assert (np.abs(ring - colour).max(axis=2) < 40).any(), (x, y)
     assert enlarged(corners, k)[0, 1] < TEXT_BAND_PX   # the first corner does lie under the band
+
+
+def test_the_board_picture_says_what_to_do_next_until_the_views_are_enough():
+    from tof_calib_ros.collect.board_picture import KEPT, PANEL_WIDTH, REFUSED, draw
+
+    amplitude = np.tile(np.linspace(100, 2000, 200), (200, 1)).astype(np.uint16)
+    below_bars = slice(360, None)   # the panel under its last bar (six bars, 50 px apart from 30)
+
+    def panel_colours(depth_progress: float, good: bool) -> tuple[bool, bool]:
+        progress = {"views": 12, "good_enough": good,
+                    "axes": {name: {"progress": depth_progress if name == "depth" else 1.0} for name in AXES}}
+        panel = draw(amplitude, collector.Outcome(False, "x"), progress)[below_bars, -PANEL_WIDTH:].astype(int)
+        return tuple(bool((np.abs(panel - np.array(c)).max(axis=2) < 40).any()) for c in (REFUSED, KEPT))
+
+    assert panel_colours(0.3, False) == (True, False)   # "next: hold it at more distances, near and far"
+    assert panel_colours(1.0, True) == (False, True)    # "enough to calibrate"
+    assert panel_colours(1.0, False) == (False, False)  # every axis full, too few views: the count says so

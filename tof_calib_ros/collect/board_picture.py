@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from ..core.detection import tone_map
-from .collector import AXES, Outcome
+from .collector import AXES, WHAT_TO_DO, Outcome, short_axes
 
 MIN_HEIGHT = 400        # px: a 200x200 sensor's frame is enlarged twice
 PANEL_WIDTH = 220       # px of bars beside the image
@@ -58,18 +58,26 @@ def draw(amplitude: np.ndarray, outcome: Outcome, progress: dict) -> np.ndarray:
                       BAR_FULL if share >= 1.0 else REFUSED, -1)
     if progress.get("good_enough"):
         cv2.putText(panel, "enough to calibrate", (10, y + 45), cv2.FONT_HERSHEY_SIMPLEX, 0.55, KEPT, 1, cv2.LINE_AA)
+    elif short_axes(progress):   # what to do next, for the least covered axis
+        for i, line in enumerate(_wrapped("next: " + WHAT_TO_DO[short_axes(progress)[0][0]], PANEL_WIDTH // 8)):
+            cv2.putText(panel, line, (10, y + 36 + LINE_PX * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, REFUSED, 1,
+                        cv2.LINE_AA)
     return np.hstack([frame, panel])
+
+
+def _wrapped(text: str, width: int) -> list[str]:
+    """``text`` in lines of at most ``width`` characters, broken between words."""
+    lines = [""]
+    for word in text.split():
+        if lines[-1] and len(lines[-1]) + len(word) + 1 > width:
+            lines.append("")
+        lines[-1] = (lines[-1] + " " + word).strip()
+    return lines
 
 
 def _text_lines(image: np.ndarray, text: str, colour: tuple[int, int, int]) -> None:
     """``text`` wrapped over the top of the image on a dark band, so it reads on any frame."""
-    width = max(20, image.shape[1] // 9)
-    words, lines = text.split(), [""]
-    for word in words:
-        if len(lines[-1]) + len(word) + 1 > width:
-            lines.append("")
-        lines[-1] = (lines[-1] + " " + word).strip()
-    lines = lines[:TEXT_LINES]
+    lines = _wrapped(text, max(20, image.shape[1] // 9))[:TEXT_LINES]
     cv2.rectangle(image, (0, 0), (image.shape[1], 8 + LINE_PX * len(lines)), (0, 0, 0), -1)
     for i, line in enumerate(lines):
         cv2.putText(image, line, (5, 20 + LINE_PX * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1, cv2.LINE_AA)

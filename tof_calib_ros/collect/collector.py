@@ -264,8 +264,7 @@ class ViewCollector:
     def still_short(self) -> str:
         """The two axes the kept views cover least of those not yet full, each with what to do
         about it; empty when all are full."""
-        short = sorted((a["progress"], name) for name, a in self.progress()["axes"].items() if a["progress"] < 1.0)
-        return "; ".join(f"{name} {share:.0%}: {WHAT_TO_DO[name]}" for share, name in short[:2])
+        return "; ".join(f"{name} {share:.0%}: {WHAT_TO_DO[name]}" for name, share in short_axes(self.progress())[:2])
 
     def _judge(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float, found: Detection,
                detected: Detection | None) -> Outcome:
@@ -407,6 +406,12 @@ class ViewCollector:
         depth = (np.nanmedian(z) - near) / (far - near)
         tilt = _tilt_deg(corners, z, self.board, w, h) / cfg.max_tilt_deg
         return np.clip(np.array([x, y, size, skew, depth, tilt], dtype=float), 0.0, 1.0)
+
+
+def short_axes(progress: dict) -> list[tuple[str, float]]:
+    """The axes not yet full in ``ViewCollector.progress``, with their progress, the least first."""
+    return sorted(((name, a["progress"]) for name, a in progress["axes"].items() if a["progress"] < 1.0),
+                  key=lambda item: item[1])
 
 
 def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) -> float:
