@@ -69,7 +69,8 @@ def test_a_sweep_adds_views_and_progress_only_rises(sweep_frames):
     # what is still short, the least covered first, says what to do about it
     least = sorted((a["progress"], name) for name, a in p["axes"].items())[:2]
     assert least[0][1] == "depth" and col.still_short() == "; ".join(
-        f"{name} {share:.0%}: {collector.WHAT_TO_DO[name]}" for share, name in least), col.still_short()
+        f"{collector.LABELS[name]} {share:.0%}: {collector.WHAT_TO_DO[name]}" for share, name in least), \
+        col.still_short()
 
 
 def test_tilt_is_measured_from_the_depth():

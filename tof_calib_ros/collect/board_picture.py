@@ -14,14 +14,13 @@ import cv2
 import numpy as np
 
 from ..core.detection import tone_map
-from .collector import AXES, WHAT_TO_DO, Outcome, short_axes
+from .collector import AXES, LABELS, WHAT_TO_DO, Outcome, short_axes
 
 MIN_HEIGHT = 400        # px: a 200x200 sensor's frame is enlarged twice
 PANEL_WIDTH = 220       # px of bars beside the image
 KEPT, REFUSED, TEXT, BAR, BAR_FULL = (60, 200, 60), (0, 150, 255), (255, 255, 255), (90, 90, 90), (60, 200, 60)
 TEXT_LINES, LINE_PX = 3, 18   # the reason, wrapped, over the top of the frame
 TEXT_BAND_PX = 8 + LINE_PX * TEXT_LINES
-LABELS = {"x": "X", "y": "Y", "size": "Size", "skew": "Skew", "depth": "Distance", "tilt": "Tilt"}
 
 
 def scale_for(height: int) -> int:

@@ -48,6 +48,9 @@ AXES = ("x", "y", "size", "skew", "depth", "tilt")
 # Small values are no achievement on these axes (camera_calibration: size and skew), so their
 # range starts at 0 and only their largest value counts.
 _FROM_ZERO = {"size", "skew", "tilt"}
+# Each axis as a person reads it, in the board picture and the messages ("depth" is the board's
+# distance, not the depth image).
+LABELS = {"x": "X", "y": "Y", "size": "Size", "skew": "Skew", "depth": "Distance", "tilt": "Tilt"}
 # What the person holding the board does to cover each axis further: camera_calibration's bars
 # say how far each is, not how to fill it.
 WHAT_TO_DO = {
@@ -264,7 +267,8 @@ class ViewCollector:
     def still_short(self) -> str:
         """The two axes the kept views cover least of those not yet full, each with what to do
         about it; empty when all are full."""
-        return "; ".join(f"{name} {share:.0%}: {WHAT_TO_DO[name]}" for name, share in short_axes(self.progress())[:2])
+        return "; ".join(f"{LABELS[name]} {share:.0%}: {WHAT_TO_DO[name]}"
+                         for name, share in short_axes(self.progress())[:2])
 
     def _judge(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float, found: Detection,
                detected: Detection | None) -> Outcome:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import Board, CalibrationError, calibrate
-from ..collect.collector import AXES, ViewCollector
+from ..collect.collector import AXES, LABELS, ViewCollector
 from ..collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from ..files.bag_io import STORAGES, BagError, BagSource, TopicError
 from ..files.calibration_file import CalibrationFileError, write_json
@@ -89,7 +89,7 @@ def _positive(kind: type) -> Callable[[str], float]:
 # -- progress ---------------------------------------------------------------------------------
 def _coverage(collector: ViewCollector) -> str:
     axes = collector.progress()["axes"]
-    return " ".join(f"{a} {axes[a]['progress']:.0%}" for a in AXES)
+    return " ".join(f"{LABELS[a]} {axes[a]['progress']:.0%}" for a in AXES)
 
 
 def _views_and_coverage(collector: ViewCollector) -> str:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import sim
+from ..collect.collector import LABELS
 from ..files.calibration_file import read_camera_yaml
 from ..sim.stream import CAMERAS, factory_K
 from .processes import (
@@ -46,7 +47,7 @@ def _progress_printer(latest: dict):
                 if status.message.startswith("calibrating") and status.message != latest.get("stage"):
                     print(f"  ({status.message})", flush=True)   # the stage a running calibration is at
                 if values.get("views") != latest.get("views"):
-                    coverage = " ".join(f"{k.split('.')[1]} {v}" for k, v in values.items()
+                    coverage = " ".join(f"{LABELS[k.split('.')[1]]} {v}" for k, v in values.items()
                                         if k.startswith("coverage."))
                     print(f"  views {values.get('views')}  (frames {values.get('frames')}; coverage {coverage})",
                           flush=True)
