@@ -68,9 +68,9 @@ def test_a_sweep_adds_views_and_progress_only_rises(sweep_frames):
     assert not p["good_enough"]  # 8 poses at 0.5..0.85 m: too few views, too little depth range
     # what is still short, the least covered first, says what to do about it
     least = sorted((a["progress"], name) for name, a in p["axes"].items())[:2]
-    assert least[0][1] == "depth" and col.still_short() == "; ".join(
+    assert least[0][1] == "depth" and collector.still_short(p) == "; ".join(
         f"{collector.LABELS[name]} {share:.0%}: {collector.WHAT_TO_DO[name]}" for share, name in least), \
-        col.still_short()
+        collector.still_short(p)
 
 
 def test_tilt_is_measured_from_the_depth():

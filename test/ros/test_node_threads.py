@@ -14,7 +14,7 @@ from ros_helpers import wait_until  # noqa: E402
 
 from tof_calib_ros import View, calibrate, sim  # noqa: E402
 from tof_calib_ros.collect import tracking  # noqa: E402
-from tof_calib_ros.collect.collector import WHAT_TO_DO  # noqa: E402
+from tof_calib_ros.collect.collector import WHAT_TO_DO, still_short  # noqa: E402
 from tof_calib_ros.ros import node as node_module  # noqa: E402
 from tof_calib_ros.ros.calibration_worker import CalibrationWorker  # noqa: E402
 
@@ -83,7 +83,7 @@ def test_the_diagnostics_show_a_running_calibration_s_stage_then_its_result(ros,
             node._judge(f.amplitude, f.depth, float(i), node._generation, thorough=True)
         n = len(node.collector)
         # short of coverage: the diagnostics and a refusal say where and what to do
-        short = node.collector.still_short()
+        short = still_short(node.collector.progress())
         assert n >= 8 and short.startswith("Distance ") and WHAT_TO_DO["depth"] in short, short
         assert node.status().message == f"collecting views ({n} of at least 8): {short}"
         node.received, node.paired = [n, n], n   # as if the frames had come on the topics

@@ -57,8 +57,8 @@ def draw(amplitude: np.ndarray, outcome: Outcome, progress: dict) -> np.ndarray:
                       BAR_FULL if share >= 1.0 else REFUSED, -1)
     if progress.get("good_enough"):
         cv2.putText(panel, "enough to calibrate", (10, y + 45), cv2.FONT_HERSHEY_SIMPLEX, 0.55, KEPT, 1, cv2.LINE_AA)
-    elif short_axes(progress):   # what to do next, for the least covered axis
-        for i, line in enumerate(_wrapped("next: " + WHAT_TO_DO[short_axes(progress)[0][0]], PANEL_WIDTH // 8)):
+    elif short := short_axes(progress):   # what to do next, for the least covered axis
+        for i, line in enumerate(_wrapped("next: " + WHAT_TO_DO[short[0][0]], PANEL_WIDTH // 8)):
             cv2.putText(panel, line, (10, y + 36 + LINE_PX * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, REFUSED, 1,
                         cv2.LINE_AA)
     return np.hstack([frame, panel])

@@ -264,12 +264,6 @@ class ViewCollector:
         return {"axes": axes, "frames": self._frames, "views": len(params),
                 "last_reason": self._last_reason, "good_enough": good}
 
-    def still_short(self) -> str:
-        """The two axes the kept views cover least of those not yet full, each with what to do
-        about it; empty when all are full."""
-        return "; ".join(f"{LABELS[name]} {share:.0%}: {WHAT_TO_DO[name]}"
-                         for name, share in short_axes(self.progress())[:2])
-
     def _judge(self, amplitude: np.ndarray, depth_m: np.ndarray, stamp: float, found: Detection,
                detected: Detection | None) -> Outcome:
         cfg = self.config
@@ -416,6 +410,12 @@ def short_axes(progress: dict) -> list[tuple[str, float]]:
     """The axes not yet full in ``ViewCollector.progress``, with their progress, the least first."""
     return sorted(((name, a["progress"]) for name, a in progress["axes"].items() if a["progress"] < 1.0),
                   key=lambda item: item[1])
+
+
+def still_short(progress: dict) -> str:
+    """The two axes of ``ViewCollector.progress`` covered least of those not yet full, each with
+    what to do about it; empty when all are full."""
+    return "; ".join(f"{LABELS[name]} {share:.0%}: {WHAT_TO_DO[name]}" for name, share in short_axes(progress)[:2])
 
 
 def _tilt_deg(corners: np.ndarray, z: np.ndarray, board: Board, w: int, h: int) -> float:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import Board, CalibrationError, calibrate
-from ..collect.collector import AXES, LABELS, ViewCollector
+from ..collect.collector import AXES, LABELS, ViewCollector, still_short
 from ..collect.replay import SKIP_KINDS, Frame, Replay, Skip, Summary, default_workers
 from ..files.bag_io import STORAGES, BagError, BagSource, TopicError
 from ..files.calibration_file import CalibrationFileError, write_json
@@ -207,7 +207,7 @@ def _require_views(summary: Summary, collector: ViewCollector, board: Board, vie
                                                                                 summary.skipped)):
             if counts:
                 why.append(f"{what}: " + ", ".join(f"{reason} ({c})" for reason, c in counts.most_common(3)))
-        short = collector.still_short()
+        short = still_short(collector.progress())
         if short:   # what a new recording should do
             why.append(f"the views kept are short of {short}")
         raise Failure(EXIT_TOO_FEW_VIEWS, f"only {n} views collected, need {views_min} "

@@ -38,7 +38,7 @@ from std_srvs.srv import Trigger
 
 from .. import Board, CalibrationError, CalibrationResult
 from ..collect.board_picture import draw
-from ..collect.collector import Outcome, ViewCollector
+from ..collect.collector import Outcome, ViewCollector, still_short
 from ..collect.replay import Replay, Summary
 from ..collect.stamp_sync import StampSync
 from ..collect.tracking import BoardTracker, accurate_detect
@@ -442,8 +442,9 @@ class CalibrationNode(Node):
                                f"pair: their header stamps differ by more than sync.slop "
                                f"({self._param('sync.slop'):g} s)")
         with self._lock:
-            short = self.collector.still_short()
-        return head + f"{short or 'move the board to new positions'} (last rejection: {self.last_problem or 'none'})"
+            progress = self.collector.progress()
+        return head + (f"{still_short(progress) or 'move the board to new positions'} "
+                       f"(last rejection: {self.last_problem or 'none'})")
 
     def _write(self, result: CalibrationResult, views: EncodedViews) -> None:
         # what it takes to recalibrate from views/ or to trace the result back to its source
@@ -504,8 +505,8 @@ class CalibrationNode(Node):
         """What the diagnostics say: a running calibration's stage, else the last result, else
         how the collection stands; and the counts behind it."""
         with self._lock:
-            progress = self.collector.progress()
-            short, need = self.collector.still_short(), self.collector.config.min_views
+            progress, need = self.collector.progress(), self.collector.config.min_views
+        short = still_short(progress)
         # the fully qualified name tells two cameras' calibration nodes apart
         status = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: view collection",
                                   hardware_id=self.frame_id)
