@@ -38,6 +38,7 @@ from tof_calib_ros.collect.replay import worker_context
 from tof_calib_ros.core.camera import pack_intrinsics
 from tof_calib_ros.core.coverage import CELLS, reach
 from tof_calib_ros.core.detection import detect_corners
+from tof_calib_ros.files.image_folder import load_views
 
 BOARD = Board(5, 7, 0.03)
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_v2_tof"
@@ -57,9 +58,8 @@ def load(data: Path, scale: float) -> list[View]:
     corner, which put the depth half a pixel off the IR at 0.4 scale, where a ToF sensor's two
     images are one)."""
     views = []
-    for ir_path in sorted(data.glob("*_ir.png")):
-        ir = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
-        depth = cv2.imread(str(ir_path).replace("_ir.png", "_depth.png"), cv2.IMREAD_UNCHANGED)
+    for stored in load_views(data):
+        ir, depth = stored.amplitude, stored.depth
         if scale != 1.0:
             size = (round(ir.shape[1] * scale), round(ir.shape[0] * scale))
             ir = cv2.resize(ir, size, interpolation=cv2.INTER_AREA)

@@ -56,8 +56,8 @@ import numpy as np
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.collect.collector import CollectorConfig, ViewCollector
 from tof_calib_ros.collect.tracking import BoardTracker, quick_locate
-from tof_calib_ros.files.calibration_file import load_views
 from tof_calib_ros.files.image_decode import decode_image, depth_to_metres
+from tof_calib_ros.files.image_folder import load_views
 from tof_calib_ros.files.output_folder import write_calibration
 from tof_calib_ros.sim import stream
 

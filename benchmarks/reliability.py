@@ -89,7 +89,8 @@ def _digest(out: Path) -> str:
 
 
 def _files_whole(out: Path) -> bool:
-    from tof_calib_ros.files.calibration_file import CalibrationFileError, load_views, read_camera_yaml
+    from tof_calib_ros.files.calibration_file import CalibrationFileError, read_camera_yaml
+    from tof_calib_ros.files.image_folder import load_views
 
     try:
         K = read_camera_yaml(out / "calibration.yaml").K

@@ -18,12 +18,12 @@ from tof_calib_ros.files import calibration_file as cf
 from tof_calib_ros.files.calibration_file import (
     CalibrationFileError,
     encode_views,
-    load_views,
     read_camera_yaml,
     save_views,
     write_camera_yaml,
     write_json,
 )
+from tof_calib_ros.files.image_folder import load_views
 from tof_calib_ros.files.output_folder import write_calibration
 
 K = np.array([[500.0, 0.0, 320.25], [0.0, 501.5, 240.125], [0.0, 0.0, 1.0]])
@@ -318,10 +318,17 @@ def test_save_views_refuses_bad_views_before_writing(tmp_path: Path, view: View,
 
 
 def test_load_views_errors(tmp_path: Path) -> None:
-    with pytest.raises(CalibrationFileError, match="no NNNN_ir.png views found"):
+    with pytest.raises(CalibrationFileError, match=r"no amplitude/depth pairs \(NNNN_ir.png with NNNN_depth.png\)"):
         load_views(tmp_path)
     cv2.imwrite(str(tmp_path / "0000_ir.png"), np.ones((4, 5), np.uint8))
+    with pytest.raises(CalibrationFileError, match="no depth image beside 0000_ir.png"):
+        load_views(tmp_path)
+    (tmp_path / "0000_depth.png").write_bytes(b"not a png")
     with pytest.raises(CalibrationFileError, match="0000_depth.png: missing or not a readable image"):
+        load_views(tmp_path)
+    (tmp_path / "0000_depth.png").write_bytes((tmp_path / "0000_ir.png").read_bytes())
+    (tmp_path / "0000_corners.csv").write_text("x,y\n")
+    with pytest.raises(CalibrationFileError, match="0000_corners.csv: not a corners file"):
         load_views(tmp_path)
 
 

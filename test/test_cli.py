@@ -232,7 +232,7 @@ def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path
     """A folder of stills is not thinned as a stream is: every view with a whole board is used;
     the views/ written beside the calibration hold their corners, and calibrate again to the same K."""
     from tof_calib_ros import calibrate
-    from tof_calib_ros.files.calibration_file import load_views
+    from tof_calib_ros.files.image_folder import load_views
 
     code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "a")
     assert code == EXIT_OK, err

@@ -13,6 +13,7 @@ import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core.projection_diff import projection_difference, projection_spread
+from tof_calib_ros.files.image_folder import load_views
 from tof_calib_ros.offline.report import ReportError, write_report
 
 BOARD = Board(8, 6, 0.04)
@@ -321,9 +322,7 @@ def test_views_that_are_not_the_result_s_are_refused(report, tmp_path):
 @pytest.mark.slow
 def test_a_report_on_real_kinect_views(kinect_dir, tmp_path):
     board = Board(5, 7, 0.03)
-    paths = sorted(kinect_dir.glob("*_ir.png"))[::6][:8]
-    views = [View(cv2.imread(str(p).replace("_ir.png", "_depth.png"), cv2.IMREAD_UNCHANGED),
-                  amplitude=cv2.imread(str(p), cv2.IMREAD_UNCHANGED)) for p in paths]
+    views = load_views(kinect_dir)[::6][:8]
     result = calibrate(views, board, depth_bias="offset+tilt")
     assert len(result.views) >= 6
     page = _Page(write_report(tmp_path / "report.html", views, board, result, title="Kinect v2").read_text("utf-8"))

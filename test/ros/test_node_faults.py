@@ -38,7 +38,8 @@ from ros_helpers import (  # noqa: E402
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from tof_calib_ros.files.calibration_file import load_views, read_camera_yaml  # noqa: E402
+from tof_calib_ros.files.calibration_file import read_camera_yaml  # noqa: E402
+from tof_calib_ros.files.image_folder import load_views  # noqa: E402
 
 COLLECT_TIMEOUT_S = 90.0
 BOARD = ("-p", "board.cols:=5", "-p", "board.rows:=7", "-p", "board.square:=0.03")

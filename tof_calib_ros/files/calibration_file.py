@@ -386,23 +386,3 @@ def save_views(directory: str | os.PathLike, views: Sequence[View] | EncodedView
     """Write views (``encode_views``, unless encoded already) into ``directory``."""
     encoded = views if isinstance(views, EncodedViews) else encode_views(views, depth_units)
     return [atomic_write(Path(directory) / name, data) for name, data in encoded.files]
-
-
-def load_views(directory: str | os.PathLike) -> list[View]:
-    """The views ``save_views`` wrote (or the Kinect v2 set), in file-name order; depth in mm,
-    with the corners they were calibrated with where those were saved."""
-    directory = Path(directory)
-    views = []
-    for ir_path in sorted(directory.glob("*_ir.png")):
-        depth_path = ir_path.with_name(ir_path.name[:-len("_ir.png")] + "_depth.png")
-        amplitude = cv2.imread(str(ir_path), cv2.IMREAD_UNCHANGED)
-        depth = cv2.imread(str(depth_path), cv2.IMREAD_UNCHANGED)
-        if amplitude is None or depth is None:
-            missing = ir_path if amplitude is None else depth_path
-            raise CalibrationFileError(f"{missing}: missing or not a readable image")
-        corners_path = ir_path.with_name(ir_path.name[:-len("_ir.png")] + CORNERS_SUFFIX)
-        ids, corners = read_corners(corners_path) if corners_path.exists() else (None, None)
-        views.append(View(depth=depth, corners=corners, ids=ids, amplitude=amplitude))
-    if not views:
-        raise CalibrationFileError(f"{directory}: no NNNN_ir.png views found")
-    return views

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..collect.replay import FrameError, Skip
 from ..core.detection import IMAGE_DTYPES
-from ..core.inputs import depth_in_metres
+from ..core.inputs import View, depth_in_metres
 from .calibration_file import CORNERS_SUFFIX, CalibrationFileError, read_corners
 from .image_decode import ImageTooLarge, check_pixels
 
@@ -168,3 +168,24 @@ def scan(directory: str | Path, depth_scale: float = 0.001,
         frames.append(FileFrame(float(len(frames)), stem, pair["amplitude"], pair["depth"], depth_scale,
                                 corners if n_corners and corners.exists() else None, n_corners))
     return frames, skips
+
+
+def load_views(directory: str | Path) -> list[View]:
+    """The views ``save_views`` wrote (or the Kinect v2 set), in name order, as they are stored
+    (integer depth in its units, millimetres there), with the corners they were calibrated with
+    where those were saved; CalibrationFileError names the first pair that cannot be read."""
+    frames, skips = scan(directory)
+    if skips:
+        raise CalibrationFileError(f"{directory}: {skips[0].reason}")
+    if not frames:
+        raise CalibrationFileError(f"{directory}: no amplitude/depth pairs (NNNN_ir.png with NNNN_depth.png)")
+    views = []
+    for frame in frames:
+        try:
+            amplitude, depth = _read(frame.amplitude_path), _read(frame.depth_path)
+        except FrameError as exc:
+            raise CalibrationFileError(str(exc)) from None
+        corners_path = frame.depth_path.with_name(f"{frame.where}{CORNERS_SUFFIX}")
+        ids, corners = read_corners(corners_path) if corners_path.exists() else (None, None)
+        views.append(View(depth=depth, corners=corners, ids=ids, amplitude=amplitude))
+    return views
