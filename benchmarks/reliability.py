@@ -334,7 +334,7 @@ os.rename, os.replace = killing(os.rename), killing(os.replace)
 K = np.array([[500.0 * scale, 0, 320], [0, 500.0 * scale, 240], [0, 0, 1]])
 view = ViewReport(index=0, rvec=np.zeros(3), tvec=np.array([0, 0, 1.0]), pixel_rms=0.2, depth_rms=0.001,
                   pixel_residuals=np.zeros((4, 2)), depth_residuals=np.zeros(4))
-result = CalibrationResult(method="depth", image_size=(640, 480), depth_convention="z", K=K, D=np.zeros(5),
+result = CalibrationResult(method="depth", image_size=(640, 480), K=K, D=np.zeros(5),
                            depth_bias=np.zeros(N_BIAS), std={"fx": 0.5, "fy": 0.5, "cx": 1.0, "cy": 1.0}, views=[view])
 views = [View(depth=np.full((48, 64), 1000 + i, np.uint16), amplitude=np.full((48, 64), 7, np.uint16))
          for i in range(n)]

@@ -57,7 +57,7 @@ def _result(K: np.ndarray = K, D: np.ndarray = D) -> CalibrationResult:
     view = ViewReport(index=0, rvec=np.zeros(3), tvec=np.array([0.0, 0.0, 1.0]), pixel_rms=0.2,
                       depth_rms=float("nan"), pixel_residuals=np.full((4, 2), 0.2),
                       depth_residuals=np.array([0.001, np.nan, -0.001, 0.0]))
-    return CalibrationResult(method="depth", image_size=(640, 480), depth_convention="z", K=K, D=D,
+    return CalibrationResult(method="depth", image_size=(640, 480), K=K, D=D,
                              depth_bias=np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
                              std={"fx": 0.5, "fy": 0.5, "cx": 1.0, "cy": float("nan")}, views=[view])
 

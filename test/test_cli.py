@@ -504,6 +504,25 @@ def test_check_passes_the_calibration_and_fails_the_factory_one(bags, calibrated
     assert scale == pytest.approx(4.0, abs=0.5)
 
 
+@pytest.mark.slow
+def test_a_recording_of_radial_depth_calibrates_and_checks_in_it(tmp_path, capsys):
+    """A raw PMD-class sensor whose depth is the light's path, calibrated on the defaults as a user
+    would: the convention is read from the boards' flatness and kept for `tof_calib check`."""
+    bag = tmp_path / "radial"
+    assert main(["simulate", "--output", str(bag), "--depth-convention", "radial", *SIM]) == EXIT_OK
+    code, out, err = run(capsys, "bag", bag, *BOARD, "--output", tmp_path / "cal")
+    assert code == EXIT_OK, err
+    assert "depth convention radial: the boards are flat read as the radial distance" in err
+    doc = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    K, K_true = np.array(doc["camera_matrix"]), np.array(_truth(bag)["camera_matrix"])
+    assert doc["depth_convention"] == "radial" and doc["options"]["depth_convention"] == "auto"
+    assert K[0, 0] == pytest.approx(K_true[0, 0], rel=0.005) and K[1, 1] == pytest.approx(K_true[1, 1], rel=0.005)
+    assert doc["depth_bias"]["depth_offset"] == pytest.approx(_truth(bag)["depth_offset_m"], abs=0.003)
+    code, out, err = run(capsys, "check", tmp_path / "cal" / "calibration.yaml", bag, *BOARD)
+    assert code == EXIT_OK, err
+    assert "(depth convention radial)" in out and "the calibration fits these views" in out
+
+
 # -- progress and the console script --------------------------------------------------------------
 class _Terminal(io.StringIO):
     def isatty(self) -> bool:

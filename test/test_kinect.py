@@ -170,6 +170,14 @@ def test_the_odd_half_takes_a_scale_from_its_bows_and_is_not_trusted_off_the_eve
     assert abs(z) < 2, (odd.K[0, 0], odd.std["fx"], reference.K[0, 0], z, odd.ok)   # trusted or not
 
 
+def test_the_kinect_depth_is_read_as_z_depth(ours_all, odd, even):
+    """The Kinect v2 gives z-depth: its boards are flat read so, whatever else its depth errs by."""
+    for result in (ours_all, odd, even):
+        assert result.depth_convention == "z"
+        assert any(r.startswith("depth convention z: the boards are flat read as z-depth")
+                   for r in result.model.reasons), result.model.reasons
+
+
 def test_the_halves_agree_within_their_uncertainty(odd, even):
     """Measured 0.32 and 0.20 % apart (2026-11-28), 0.6 sigmas of the difference; the even half
     took k3 = -0.88, which folds its lens back 237 px from the centre, and was 0.14 and 0.03 %

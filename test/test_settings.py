@@ -74,13 +74,16 @@ def test_the_wiggle_term_is_refused_without_the_modulation_frequency(capsys):
 def test_the_radial_term_is_refused_for_radial_depth():
     """An offset in the light's path is the depth offset where the depth is the light's path."""
     assert "the radial term is for z-depth" in refusal({"depth.bias": "offset+radial", "depth.convention": "radial"})
+    # the data might choose radial depth, where the term has no meaning: asked for, z must be said
+    assert "the radial term is for z-depth" in refusal({"depth.bias": "offset+radial", "depth.convention": "auto"})
     assert refusal({"depth.bias": "offset+radial", "depth.convention": "z"}) is None
 
 
 def test_the_settings_reach_calibrate_and_the_collector():
     values = defaults() | {"calibration.loss": "huber", "depth.bias": "offset+tilt", "views.max": 30}
-    assert calibration_options(values) == {"depth_convention": "z", "depth_bias": "offset+tilt", "distortion": "auto",
-                                           "loss": "huber", "plane_squares": "auto", "modulation_hz": None}
+    assert calibration_options(values) == {"depth_convention": "auto", "depth_bias": "offset+tilt",
+                                           "distortion": "auto", "loss": "huber", "plane_squares": "auto",
+                                           "modulation_hz": None}
     assert calibration_options(defaults())["loss"] is None
     config = collector_config(values, stills=True)
     assert (config.max_views, config.min_views, config.stills) == (30, 8, True)

@@ -15,17 +15,16 @@ from typing import Any
 
 from .collect.collector import CollectorConfig
 from .core.board import MAX_CORNERS_PER_SIDE, MAX_SQUARE_M, MIN_CORNERS_PER_SIDE, MIN_SQUARE_M
-from .core.camera import DEPTH_CONVENTIONS
 from .core.errors import CalibrationError
-from .core.options import DISTORTION_TERMS, PLANE_SQUARES, CalibrationOptions
+from .core.options import CONVENTIONS, DISTORTION_TERMS, PLANE_SQUARES, CalibrationOptions
 from .files.calibration_file import CAMERA_NAME
 
 LOSSES = ("none", "huber", "cauchy")
 
 
 def _depth_model(value: str) -> str | None:
-    try:   # calibrate's own check of the terms; the modulation frequency is judged with it in ``refusal``
-        CalibrationOptions(depth_bias=value, modulation_hz=20e6)
+    try:   # calibrate's own check of the terms; the frequency and convention are judged with it in ``refusal``
+        CalibrationOptions(depth_convention="z", depth_bias=value, modulation_hz=20e6)
     except CalibrationError as exc:
         return str(exc)
     return None
@@ -88,8 +87,9 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
             read_only=True),
     Setting("board.square", 0.03, "square size, metres", flag="--square", low=MIN_SQUARE_M, high=MAX_SQUARE_M,
             read_only=True),
-    Setting("depth.convention", "z", "depth along the optical axis ('z', REP 118, Kinect) or from the optical "
-            "centre ('radial', raw PMD)", flag="--depth-convention", choices=DEPTH_CONVENTIONS),
+    Setting("depth.convention", "auto", "depth along the optical axis ('z', REP 118, Kinect), from the optical "
+            "centre ('radial', raw PMD), or 'auto': the one the board is flat in (z where both read alike)",
+            flag="--depth-convention", choices=CONVENTIONS),
     Setting("depth.scale", 0.001, "metres per count of integer (16UC1) depth; 0.001: millimetres",
             flag="--depth-scale", low=1e-6, high=10.0),
     Setting("depth.bias", "auto", "the depth's systematic error terms estimated alongside: auto (the offset, "
@@ -149,7 +149,7 @@ def refusal(values: Mapping[str, Any]) -> str | None:
     bias, mhz = values.get("depth.bias"), values.get("depth.modulation_mhz")
     if bias is not None and mhz is not None:
         try:   # calibrate's own check of the two together
-            CalibrationOptions(depth_bias=bias, modulation_hz=_modulation_hz(mhz))
+            CalibrationOptions(depth_convention="z", depth_bias=bias, modulation_hz=_modulation_hz(mhz))
         except CalibrationError as exc:
             return f"depth.bias {bias!r} with depth.modulation_mhz {mhz}: {exc}"
     convention = values.get("depth.convention")

@@ -230,7 +230,7 @@ def test_parameters_are_checked(launch, spinner):
         return set_parameter(spinner, "/t4/calibration_node", name, value, procs)
 
     ok, reason = set_one("depth.convention", "disparity")
-    assert not ok and "depth.convention must be one of 'z', 'radial'" in reason, reason
+    assert not ok and "depth.convention must be one of 'auto', 'z', 'radial'" in reason, reason
     ok, reason = set_one("board.cols", 6)
     assert not ok and "read-only" in reason, reason
     ok, reason = set_one("camera_name", "tof-camera")
@@ -246,7 +246,7 @@ def test_parameters_are_checked(launch, spinner):
     # The same check refuses a bad value given at start-up, with the reason, not at calibration.
     bad = launch("calibration_node", "-r", "__ns:=/t4b", "-p", "depth.convention:=disparity")
     wait_until(lambda: not bad.alive(), START_TIMEOUT_S, "the node to refuse depth.convention:=disparity")
-    assert bad.proc.returncode == 1 and "must be one of 'z', 'radial'" in bad.output(), logs(bad)
+    assert bad.proc.returncode == 1 and "must be one of 'auto', 'z', 'radial'" in bad.output(), logs(bad)
 
 
 @pytest.mark.slow

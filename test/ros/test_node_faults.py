@@ -261,7 +261,7 @@ def test_any_parameter_value_is_applied_or_refused_with_a_reason(launch, spinner
     for name, v in zip(PARAMETERS, got):
         held[name] = [v.bool_value, v.integer_value, v.double_value, v.string_value][v.type - 1]
     assert (held["board.cols"], held["board.rows"], held["board.square"]) == (5, 7, 0.03)   # read-only
-    assert held["depth.convention"] in ("z", "radial")
+    assert held["depth.convention"] in ("auto", "z", "radial")
     assert 1e-6 <= held["depth.scale"] <= 10.0 and 0.0 <= held["sync.slop"] <= 1.0
     assert 3 <= held["views.min"] <= held["views.max"] <= 1000
     assert CAMERA_NAME.fullmatch(held["camera_name"]) and held["output_dir"].strip()

@@ -11,20 +11,23 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from . import depth_bias as bias_model
-from .camera import check_convention
+from .camera import DEPTH_CONVENTIONS
 from .errors import CalibrationError
 
 # The distortion presets, each the one before plus terms (indices into the intrinsics).
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
                     "full": [4, 5, 6, 7, 8]}
 PLANE_SQUARES = ("auto", "white", "all")
+CONVENTIONS = ("auto", *DEPTH_CONVENTIONS)
 METHODS = ("depth", "traditional")
 LOSSES = (None, "huber", "cauchy")
 
 
 @dataclass(frozen=True)
 class CalibrationOptions:
-    """``depth_bias``: 'auto' (the offset, and scale, tilt and a radial offset where the data call
+    """``depth_convention``: 'z' (along the optical axis, REP 118), 'radial' (the light's path) or
+    'auto' (the one the boards are flat in; z where they read alike: core.depth_convention).
+    ``depth_bias``: 'auto' (the offset, and scale, tilt and a radial offset where the data call
     for them), 'none', or terms from 'offset', 'scale', 'tilt', 'wiggle', 'radial' joined by '+'
     ('radial', an offset in the light's path, only for z-depth: in radial depth it is the offset).
     ``distortion``: 'auto' (the terms the data call for; with method 'traditional', plumb_bob,
@@ -37,7 +40,7 @@ class CalibrationOptions:
     model_choice.select_model). A depth_bias naming 'wiggle' needs it."""
 
     method: str = "depth"
-    depth_convention: str = "z"
+    depth_convention: str = "auto"
     depth_units: float | None = None
     depth_bias: str = "auto"
     distortion: str = "auto"
@@ -49,7 +52,9 @@ class CalibrationOptions:
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise CalibrationError(f"method must be 'depth' or 'traditional', got {self.method!r}")
-        check_convention(self.depth_convention)
+        if self.depth_convention not in CONVENTIONS:
+            raise CalibrationError(f"depth_convention must be one of {', '.join(map(repr, CONVENTIONS))}, "
+                                   f"got {self.depth_convention!r}")
         if self.modulation_hz is not None and not (isinstance(self.modulation_hz, (int, float))
                                                    and 1e5 <= self.modulation_hz <= 1e10):
             raise CalibrationError(f"modulation_hz must be a frequency from 100 kHz to 10 GHz or None, "
@@ -59,9 +64,9 @@ class CalibrationOptions:
             if self.modulation_hz is None and set(bias_model.TERMS["wiggle"]) & set(terms):
                 raise CalibrationError("the wiggle term needs the camera's modulation frequency "
                                        "(modulation_hz), which sets the wiggle's period")
-            if self.depth_convention == "radial" and set(bias_model.TERMS["radial"]) & set(terms):
-                raise CalibrationError("the radial term is for z-depth: in radial depth an offset in the light's "
-                                       "path is the depth offset ('offset')")
+            if self.depth_convention != "z" and set(bias_model.TERMS["radial"]) & set(terms):
+                raise CalibrationError("the radial term is for z-depth (depth_convention 'z'): in radial depth an "
+                                       "offset in the light's path is the depth offset ('offset')")
         if not isinstance(self.distortion, str) or self.distortion not in ("auto", *DISTORTION_TERMS):
             raise CalibrationError(f"distortion must be 'auto' or one of {sorted(DISTORTION_TERMS)}, "
                                    f"got {self.distortion!r}")
@@ -75,7 +80,7 @@ class CalibrationOptions:
         """These options with every 'auto' replaced by what ``model`` chose: the same
         calibration on other views (halves, held-out views) without choosing again."""
         hz = self.modulation_hz if model.wiggle_period is None else bias_model.modulation_hz(model.wiggle_period)
-        return CalibrationOptions(self.method, self.depth_convention, self.depth_units, model.depth_bias,
+        return CalibrationOptions(self.method, model.depth_convention, self.depth_units, model.depth_bias,
                                   model.distortion, self.loss, model.plane_squares, self.min_views, hz)
 
     @property
@@ -97,7 +102,8 @@ class Model:
     ``depth_inflation``: how many times its noise the depth's error was taken to be, where the
     depth at its full weight pulled the corners off their fit (1: its noise).
     ``wiggle_period``: the period (m) of the depth model's wiggle, where it has one: from the
-    modulation frequency given, or the one the data chose."""
+    modulation frequency given, or the one the data chose. ``depth_convention``: the depth's, as
+    given or as the boards' flatness chose (core.depth_convention)."""
 
     distortion: str = "none"
     depth_bias: str = "none"
@@ -107,6 +113,7 @@ class Model:
     dropped_corners: dict[int, list[int]] = field(default_factory=dict)
     depth_inflation: float = 1.0
     wiggle_period: float | None = None
+    depth_convention: str = "z"
 
     def to_dict(self) -> dict:
         out = asdict(self)

@@ -24,6 +24,7 @@ from . import depth_bias as bias_model
 from .board import Board
 from .camera import N_INTRINSICS, split_intrinsics, transform_views
 from .coverage import reach
+from .depth_convention import convention_evidence
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, square_from_depth, update_intrinsics
 from .depth_trust import CORNER_FOLDS, CornersAlone, DepthCheck, bowl_check, depth_check, less_certain, why_yield
 from .detection import detect
@@ -142,14 +143,14 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
     if corner_fit is not None:
         corner_focal = corner_fit.focal()
         corner_noise = noise_per_dof(corner_fit.pixel_residuals, len(corner_fit.free_global))
-    return CalibrationResult(options.method, image_size, options.depth_convention, K, D, fit.state.bias.copy(),
+    return CalibrationResult(options.method, image_size, K, D, fit.state.bias.copy(),
                              fit.std(), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
                              board.square, corner_noise=corner_noise, noise_std=(noise_fit or fit).std(),
                              depth_focal=depth_focal, run_intrinsics=None if runs is None else runs[:, :N_INTRINSICS])
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,
-              depth_convention: str = "z", method: str = "depth", *, depth_units: float | None = None,
+              depth_convention: str = "auto", method: str = "depth", *, depth_units: float | None = None,
               depth_bias: str = "auto", distortion: str = "auto", loss: str | None = None,
               plane_squares: str = "auto", min_views: int = 3, modulation_hz: float | None = None,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
@@ -159,8 +160,8 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     ``method='traditional'`` is OpenCV's Zhang calibration on the same corners (the baseline,
     with the ``distortion`` preset asked for);
     ``'depth'`` is the depth-aided method. The model is chosen by the data where an option is
-    'auto' (the defaults): the distortion terms, the depth error terms and the squares the depth
-    planes use; see ``CalibrationOptions`` for the choices, and ``result.model`` for what was
+    'auto' (the defaults): the depth convention, the distortion terms, the depth error terms and
+    the squares the depth planes use; see ``CalibrationOptions`` for the choices, and ``result.model`` for what was
     chosen and why. ``loss`` 'huber' or 'cauchy' makes the fit robust to misdetected corners.
     Raises CalibrationError with the reason when the options are wrong or the views cannot be
     calibrated; check ``result.verdict`` before trusting a result.
@@ -223,33 +224,57 @@ def _without(view: View, board: Board, drop: list[int]) -> tuple[np.ndarray | No
     return np.asarray(corners)[keep], ids[keep]
 
 
+def _white_planes(samples: list[DepthSamples | None], intr: np.ndarray, convention: str
+                  ) -> tuple[list[Plane | None], dict[int, str]]:
+    """Each view's plane through its white squares (None where it has no samples), and why it
+    failed where it did (by position)."""
+    planes: list[Plane | None] = []
+    failed = {}
+    for k, smp in enumerate(samples):
+        try:
+            planes.append(None if smp is None else fit_samples(smp.subset(~smp.black), intr, convention))
+        except CalibrationError as exc:
+            planes.append(None)
+            failed[k] = str(exc)
+    return planes, failed
+
+
 def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, corner_poses: np.ndarray | None,
                    width: int, options: CalibrationOptions, notes: list[str], say: Callable[[str], None]
-                   ) -> tuple[PlaneSamples, str, str]:
+                   ) -> tuple[PlaneSamples, str, str, list[str]]:
     """Each view's plane samples, chosen once (valid depth, RANSAC inliers) on the squares the
-    planes use, those squares and why (``intr``, ``corner_poses``: OpenCV's calibration, or the
-    intrinsics the depth guesses and no poses where it refused). A view whose depth is unusable
-    still counts with its corners, and the notes say so."""
-    convention = options.depth_convention
+    planes use, those squares, the depth convention (chosen by the boards' flatness where asked
+    'auto') and why each (``intr``, ``corner_poses``: OpenCV's calibration, or the intrinsics
+    the depth guesses and no poses where it refused). A view whose depth is unusable still
+    counts with its corners, and the notes say so."""
+    asked = options.depth_convention
+    convention = "z" if asked == "auto" else asked
     sampled = "all" if options.plane_squares == "auto" else options.plane_squares
     samples: list[DepthSamples | None] = []
-    white_inliers: list[np.ndarray | None] = []
-    first_planes, black_offsets = [], []
-    for v in prepared:
+    failed = {}
+    for k, v in enumerate(prepared):
         try:
-            smp = board_samples(v.depth, v.corners, v.ids, board, intr, v.amplitude, squares=sampled)
-            plane = fit_samples(smp.subset(~smp.black), intr, convention)
-            offset = black_offset(smp, plane, intr, convention)
-            if offset is not None:
-                black_offsets.append(offset)
-            samples.append(smp)
-            white_inliers.append(plane.inliers)
-            first_planes.append(plane)
+            samples.append(board_samples(v.depth, v.corners, v.ids, board, intr, v.amplitude, squares=sampled))
         except CalibrationError as exc:
             samples.append(None)
-            white_inliers.append(None)
-            notes.append(f"view {v.index}: {exc}; used for its corners only")
-            say(notes[-1])
+            failed[k] = str(exc)
+    white, unfitted = _white_planes(samples, intr, convention)
+    evidence = convention_evidence(samples, white, intr)
+    reasons = []
+    if asked == "auto":
+        convention, why = evidence.choice()
+        reasons.append(why)
+        if convention != "z":
+            white, unfitted = _white_planes(samples, intr, convention)
+    elif evidence.doubt(asked):
+        reasons.append(evidence.doubt(asked))
+    for why in reasons:
+        say(why)
+    for k, why in sorted({**failed, **unfitted}.items()):
+        samples[k] = None
+        notes.append(f"view {prepared[k].index}: {why}; used for its corners only")
+        say(notes[-1])
+    first_planes = [plane for plane, smp in zip(white, samples) if smp is not None]
     if len(first_planes) < MIN_SIZED_VIEWS:   # with one, K ran off (fx 80 times the truth) or its pose failed
         raise CalibrationError(f"the depth shows the board in {len(first_planes)} of {len(prepared)} views (0 or NaN, "
                                f"or too few pixels, in the others), too few to size its squares (at least "
@@ -257,10 +282,12 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
                                "calibrates from the corners alone")
     _check_not_parallel(first_planes, corner_poses)
     squares = options.plane_squares
-    squares_reason = ""
     if squares == "auto":
-        apart, squares_reason = black_reads_apart(black_offsets)
+        offsets = [black_offset(smp, plane, intr, convention) for smp, plane in zip(samples, white)
+                   if smp is not None]
+        apart, squares_reason = black_reads_apart([o for o in offsets if o is not None])
         squares = "white" if apart else "all"
+        reasons.append(squares_reason)
         say(squares_reason)
     # The RANSAC inliers of the chosen squares are the view's samples from here on (the white
     # squares' were found above).
@@ -269,8 +296,8 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
             if squares == "all":
                 samples[k] = smp.subset(fit_samples(smp, intr, convention).inliers)
             else:
-                samples[k] = smp.subset(~smp.black).subset(white_inliers[k])
-    return PlaneSamples(samples, width), squares, squares_reason
+                samples[k] = smp.subset(~smp.black).subset(white[k].inliers)
+    return PlaneSamples(samples, width), squares, convention, reasons
 
 
 def _sized_intrinsics(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray],
@@ -377,7 +404,9 @@ def _over_runs(stated: bundle.Fit, runs: np.ndarray | None, free) -> tuple[bundl
 
 def _calibrate(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     say = progress or (lambda _msg: None)
-    convention = options.depth_convention
+    asked = options
+    # the corners alone have no depth: their fit is the same in either convention
+    convention = "z" if options.depth_convention == "auto" else options.depth_convention
     prepared, rejected, image_size = prepare(views, board, image_size, options.depth_units)
     say(f"{len(prepared)} of {len(views)} views have a board")
     require(prepared, rejected, options.min_views, len(views))
@@ -399,22 +428,23 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
 
     corner_fit = None if trad is None else _corner_fit(obj, prepared, trad, convention, lens)
     if options.method == "traditional":
-        model = Model(distortion=lens, depth_bias="none", plane_squares="white")
+        model = Model(distortion=lens, depth_bias="none", plane_squares="white", depth_convention=convention)
         return _result(options, model, board, image_size, corner_fit, prepared, None, rejected, notes)
 
     # 2. the depth planarized at the corners; 3. K from the squares' size; 4. the poses from the 3D corners
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
     first, corner_poses = (guess, None) if trad is None else (trad.intrinsics, trad.poses)
-    plane_samples, squares, squares_reason = _plane_samples(prepared, board, first, corner_poses, image_size[0],
-                                                            options, notes, say)
+    plane_samples, squares, convention, sampled = _plane_samples(prepared, board, first, corner_poses, image_size[0],
+                                                                 options, notes, say)
+    options = replace(options, depth_convention=convention)
     intr, bias = _sized_intrinsics(prepared, plane_samples, obj, [guess] if trad is None else [trad.intrinsics, guess],
                                    options, say)
     observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
     # 5. the joint fit in the model the data call for, the depth's weight falling where it leaves
     # the result worse than the corners alone
     fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
-    asked, found_wiggle = options, None
+    found_wiggle = None
     if options.depth_bias == "auto" and options.modulation_hz is None:
         found_wiggle = look_for_wiggle(prepared, plane_samples, obj, fitted, start, options, say)
         if found_wiggle.refit is not None:
@@ -445,7 +475,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # or depth unit) whatever its yield makes of the rest: the yield would only delay the refusal
     # (7 model choices, 5 of the 7.8 minutes a wrong unit took on 60 views)
     refuted = corner_fit is not None and bool(focal_disagreements(depth_focal, corner_fit.focal()))
-    found = ([] if found_wiggle is None else [found_wiggle.reason]) + [squares_reason] * bool(squares_reason) \
+    found = ([] if found_wiggle is None else [found_wiggle.reason]) + [r for r in sampled if r] \
         + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
     # Where the depth pulls the corners off their fit, its error is one the model does not explain
@@ -512,6 +542,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         model.reasons.append(weighted)
         say(weighted)
     model.wiggle_period = options.wiggle_period
+    model.depth_convention = convention
     if found_wiggle is not None:
         model.evidence["wiggle"] = found_wiggle.evidence
     extrapolated = None if runs is None else reach(stated.state.intrinsics, runs[:, :N_INTRINSICS],

@@ -100,7 +100,6 @@ class ViewReport:
 class CalibrationResult:
     method: str
     image_size: tuple[int, int]
-    depth_convention: str
     K: np.ndarray
     D: np.ndarray
     depth_bias: np.ndarray        # offset (m), scale, tilt_x, tilt_y, wiggle sin, cos (m), radial (m): core.depth_bias
@@ -123,6 +122,10 @@ class CalibrationResult:
     run_intrinsics: np.ndarray | None = None
     # where the views left part of the image unreached and the projection there is much less known
     extrapolated: Extrapolated | None = None
+
+    @property
+    def depth_convention(self) -> str:
+        return self.model.depth_convention
 
     @property
     def depth_offset(self) -> float:

@@ -352,7 +352,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     board = _board(args)
     calibration = load_calibration(args.calibration)
-    convention = args.depth_convention or calibration.depth_convention or "z"
+    # the convention given, else the one the calibration was made in ('auto' chose it then)
+    given = None if args.depth_convention == "auto" else args.depth_convention
+    convention = given or calibration.depth_convention or "z"
     print(f"checking {calibration.source} (depth convention {convention})")
     source = Path(args.data)
     if is_image_folder(source):
@@ -410,7 +412,7 @@ def _add_board(p: argparse.ArgumentParser, required: bool = True) -> None:
     _option(p, "board.square", "M", **({"required": True, "default": None} if required else {}))
 
 
-def _add_collection(p: argparse.ArgumentParser, convention_default: str | None = "z") -> None:
+def _add_collection(p: argparse.ArgumentParser, convention_default: str | None = "auto") -> None:
     _option(p, "depth.convention", default=convention_default)
     _option(p, "depth.scale", "M")
     _option(p, "views.min", "N")

@@ -174,8 +174,10 @@ def _view_data(views: Sequence[View], board: Board, result: CalibrationResult,
 
 def _calibrate(views: list[View], board: Board, result: CalibrationResult, method: str,
                options: dict) -> CalibrationResult | str:
+    # the convention a depth-aided result chose, or, where none was (a traditional result's), the one asked
+    convention = result.depth_convention if result.method == "depth" else result.options.depth_convention
     try:
-        return calibrate(views, board, result.image_size, result.depth_convention, method, **options)
+        return calibrate(views, board, result.image_size, convention, method, **options)
     except CalibrationError as exc:
         return str(exc)
 
