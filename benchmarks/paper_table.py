@@ -11,7 +11,9 @@ noise that grows as the amplitude falls, with and without a range offset and bla
 read farther, with and without 15 mm of wiggling error (a sinusoid of the radial distance with a
 1.87 m period, c / 8f at 20 MHz, its phase drawn per trial); on two wiggling sensors (one with a
 fifth of the depth noise) ours is also told the modulation frequency (``modulation_hz``, as a
-user who knows the camera would). Both pose regimes: near frontal
+user who knows the camera would); one sensor gives the radial distance (the light's path, as raw
+PMD sensors do) instead of z, ours on its defaults (which choose the convention from the data)
+and told z, ROS's convention. Both pose regimes: near frontal
 (tilt <= 5 deg) and general (<= 40 deg). Also printed: how often the true fx lies within two
 of ours' stated standard deviations (``sigma_ok``), how often ours is trusted, and how often it is
 trusted while the truth lies beyond those two sigmas (``trusted_wrong``, the worst outcome), and,
@@ -37,6 +39,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy.stats import binomtest
@@ -61,15 +64,29 @@ WIGGLE = dict(wiggle_amplitude=0.015, wiggle_period=wiggle_period(MODULATION_HZ)
 TOF = dict(depth=0.01)                                # 10 mm on a white square at 1 m, sqrt(1/amplitude)
 QUIET = dict(depth=0.002)                             # a quieter sensor (or longer exposure): 2 mm
 BIAS = dict(offset=0.025, dark_offset=0.015)         # a Kinect-like offset, black squares 13 mm farther
-# name: (camera parameters, noise keywords, what ours is told of the sensor)
+
+
+class Sensor(NamedTuple):
+    params: np.ndarray      # the camera's intrinsics
+    noise: dict             # sim.Noise keywords
+    told: dict              # what ours is told of the sensor (calibrate's keywords)
+    convention: str = "z"   # the depth it gives
+    scenes_of: str = ""     # the sensor whose scenes (seeds) it shares, where only ``told`` differs
+
+
 SENSORS = {
-    "paper": (PINHOLE, dict(depth_const=0.01), {}),
-    "tof": (LENS, TOF, {}),
-    "tof+bias": (LENS, {**TOF, **BIAS}, {}),
-    "tof+wiggle": (LENS, {**TOF, **WIGGLE}, {}),
-    "tof+bias+wiggle": (LENS, {**TOF, **BIAS, **WIGGLE}, {}),
-    "tof+wiggle,20MHz-given": (LENS, {**TOF, **WIGGLE}, dict(modulation_hz=MODULATION_HZ)),
-    "quiet-tof+wiggle,20MHz-given": (LENS, {**QUIET, **WIGGLE}, dict(modulation_hz=MODULATION_HZ)),
+    "paper": Sensor(PINHOLE, dict(depth_const=0.01), {}),
+    "tof": Sensor(LENS, TOF, {}),
+    "tof+bias": Sensor(LENS, {**TOF, **BIAS}, {}),
+    "tof+wiggle": Sensor(LENS, {**TOF, **WIGGLE}, {}),
+    "tof+bias+wiggle": Sensor(LENS, {**TOF, **BIAS, **WIGGLE}, {}),
+    "tof+wiggle,20MHz-given": Sensor(LENS, {**TOF, **WIGGLE}, dict(modulation_hz=MODULATION_HZ)),
+    "quiet-tof+wiggle,20MHz-given": Sensor(LENS, {**QUIET, **WIGGLE}, dict(modulation_hz=MODULATION_HZ)),
+    # the radial distance, as raw PMD sensors give it: ours on its defaults, and told z (ROS's
+    # convention, and ours' default before it chose the convention from the data)
+    "radial-tof+bias": Sensor(LENS, {**TOF, **BIAS}, {}, "radial"),
+    "radial-tof+bias,z-given": Sensor(LENS, {**TOF, **BIAS}, dict(depth_convention="z"), "radial",
+                                      "radial-tof+bias"),
 }
 # Table 1 of the paper: mean 3D error in mm, [corners][images].
 PAPER = {
@@ -115,7 +132,7 @@ def bounds(scene: Scene, seed: int, period_known: bool) -> dict:
 
 def trial(args) -> dict:
     sensor, regime, n_img, n_corn, seed, with_bound = args
-    params, noise, told = SENSORS[sensor]
+    params, noise, told, convention, _ = SENSORS[sensor]
     camera = sim.SimCamera(params, 200, 200)
     rng = np.random.default_rng(seed)
     if "wiggle_amplitude" in noise:
@@ -124,11 +141,11 @@ def trial(args) -> dict:
     ids = subgrid(n_corn)
     views = []
     for rvec, tvec in poses:
-        frame = sim.render(camera, BOARD, rvec, tvec, noise=sim.Noise(**noise), rng=rng)
+        frame = sim.render(camera, BOARD, rvec, tvec, convention=convention, noise=sim.Noise(**noise), rng=rng)
         views.append(View(frame.depth, frame.corners[ids] + rng.normal(0, CORNER_NOISE, (len(ids), 2)), ids))
     out = {}
     if with_bound:
-        out["bound"] = bounds(Scene(camera, BOARD, poses, ids, sim.Noise(**noise), CORNER_NOISE), seed,
+        out["bound"] = bounds(Scene(camera, BOARD, poses, ids, sim.Noise(**noise), CORNER_NOISE, convention), seed,
                               "modulation_hz" in told)
     for name, kwargs in METHODS.items():
         t0 = time.perf_counter()
@@ -162,8 +179,9 @@ def main() -> None:
     args = ap.parse_args()
     regimes = list(REGIMES) if args.regime == "both" else [args.regime]
     cells = [(s, r, i, c) for s in args.sensor for r in regimes for c in CORNERS for i in IMAGES]
-    jobs = [(s, r, i, c, 100000 * list(SENSORS).index(s) + 1000 * k + 7 * i + c + 50000 * list(REGIMES).index(r),
-             k < args.bound_trials) for s, r, i, c in cells for k in range(args.trials)]
+    jobs = [(s, r, i, c, 100000 * list(SENSORS).index(SENSORS[s].scenes_of or s) + 1000 * k + 7 * i + c
+             + 50000 * list(REGIMES).index(r), k < args.bound_trials)
+            for s, r, i, c in cells for k in range(args.trials)]
     t0 = time.time()
     runs = []
     with worker_context().Pool(args.jobs) as pool:   # fresh workers, not forks of this process

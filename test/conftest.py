@@ -17,6 +17,24 @@ def kinect_dir() -> Path:
     return KINECT_DIR
 
 
+@pytest.fixture
+def four_corner_views():
+    """Three near-frontal views of an 8x6 board of 40 mm, four corners each, where OpenCV refuses;
+    the camera (f = 284.4) has no lens distortion, which four corners cannot tell from the focal
+    length."""
+    import numpy as np
+
+    from tof_calib_ros import Board, View, sim
+
+    board = Board(8, 6, 0.04)
+    cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)
+    rng = np.random.default_rng(2)
+    ids = np.array([0, board.cols - 1, board.n_corners - board.cols, board.n_corners - 1])
+    poses = sim.random_poses(cam, board, 3, rng, distance=(0.55, 0.9), max_tilt_deg=5)
+    frames = [sim.render(cam, board, r, t, noise=sim.Noise(depth_const=0.01), rng=rng) for r, t in poses]
+    return [View(f.depth, f.corners[ids] + rng.normal(0, 0.01, (4, 2)), ids) for f in frames]
+
+
 # In CI nothing may be skipped: the real data and the ROS wheels are there, and a test skipped
 # for want of them would leave the run green with that part of the product untested.
 _skipped: list[str] = []

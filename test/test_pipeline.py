@@ -73,16 +73,10 @@ def test_the_traditional_baseline_fits_the_lens_model_asked_for():
     assert radial.model.distortion == "k1k2" and np.all(radial.D[2:] == 0)
 
 
-def test_four_corners_three_images_where_opencv_refuses():
-    # Four corners cannot tell lens distortion from focal length, so the camera has none here.
-    cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)
-    rng = np.random.default_rng(2)
-    ids = np.array([0, BOARD.cols - 1, BOARD.n_corners - BOARD.cols, BOARD.n_corners - 1])
-    poses = sim.random_poses(cam, BOARD, 3, rng, distance=(0.55, 0.9), max_tilt_deg=5)
-    frames = [sim.render(cam, BOARD, r, t, noise=sim.Noise(depth_const=0.01), rng=rng) for r, t in poses]
-    views = [View(f.depth, f.corners[ids] + rng.normal(0, 0.01, (4, 2)), ids) for f in frames]
+def test_four_corners_three_images_where_opencv_refuses(four_corner_views):
+    views = four_corner_views
     with pytest.raises(CalibrationError, match="OpenCV"):
-        calibrate_opencv([BOARD.object_points(ids)] * 3, [v.corners for v in views], (200, 200))
+        calibrate_opencv([BOARD.object_points(v.ids) for v in views], [v.corners for v in views], (200, 200))
     res = calibrate(views, BOARD, depth_bias="none")
     assert res.K[0, 0] == pytest.approx(CAM.params[0], rel=0.005)
     assert any("OpenCV" in n for n in res.notes)

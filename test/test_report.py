@@ -247,13 +247,8 @@ def test_halves_further_apart_than_their_sigmas_take_the_trust_out_of_the_banner
     assert "Trusted:" in _section_summary(result, views, options, agree)
 
 
-def test_where_opencv_refuses_the_report_says_so(tmp_path):
-    cam = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, 0, 0, 0, 0, 0]), 200, 200)
-    rng = np.random.default_rng(2)
-    ids = np.array([0, BOARD.cols - 1, BOARD.n_corners - BOARD.cols, BOARD.n_corners - 1])
-    poses = sim.random_poses(cam, BOARD, 3, rng, distance=(0.55, 0.9), max_tilt_deg=5)
-    frames = [sim.render(cam, BOARD, r, t, noise=sim.Noise(depth_const=0.01), rng=rng) for r, t in poses]
-    views = [View(f.depth, f.corners[ids] + rng.normal(0, 0.01, (4, 2)), ids) for f in frames]
+def test_where_opencv_refuses_the_report_says_so(four_corner_views, tmp_path):
+    views = four_corner_views
     result = calibrate(views, BOARD, depth_bias="none")
     page = _Page(write_report(tmp_path / "r.html", views, BOARD, result).read_text("utf-8"))
     comparison = page.sections["comparison"]
