@@ -35,6 +35,12 @@ def in_cells(cells: np.ndarray, pixels: np.ndarray, image_size: tuple[int, int])
     return cells[cell_of(pixels[..., 0], image_size[0]), cell_of(pixels[..., 1], image_size[1])]
 
 
+def grid_in_cells(cells: np.ndarray, xs: np.ndarray, ys: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(len(ys), len(xs)): whether each pixel of the grid of columns ``xs`` and rows ``ys`` lies in
+    a cell ``cells`` marks."""
+    return cells[cell_of(xs, image_size[0])[None, :], cell_of(ys, image_size[1])[:, None]]
+
+
 class Reach(NamedTuple):
     xs: np.ndarray        # (W',) pixel columns of the map
     ys: np.ndarray        # (H',) pixel rows
@@ -82,5 +88,4 @@ def reach(intrinsics: np.ndarray, runs: np.ndarray, corners: np.ndarray, image_s
     without each run of views), and which pixels lie in cells the ``corners`` (N, 2) reached."""
     reached = cell_counts(corners, image_size) > 0
     xs, ys, spread = projection_spread(intrinsics, runs, image_size, corners)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1)
-    return Reach(xs, ys, spread, in_cells(reached, grid, image_size), int(reached.sum()))
+    return Reach(xs, ys, spread, grid_in_cells(reached, xs, ys, image_size), int(reached.sum()))

@@ -38,7 +38,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from ..core import depth_bias as bias_model
 from ..core.board import Board
 from ..core.camera import depth_of, pack_intrinsics, project, transform
-from ..core.coverage import CELLS, cell_counts, cell_of, in_cells, reach
+from ..core.coverage import CELLS, cell_counts, cell_of, grid_in_cells, in_cells, reach
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 from ..core.pipeline import calibrate
@@ -768,7 +768,7 @@ def _halves_projection(first: CalibrationResult, second: CalibrationResult, data
     seen = seen[in_cells(both, seen, result.image_size)] if both.any() else seen
     pd = projection_difference(pack_intrinsics(first.K, first.D), pack_intrinsics(second.K, second.D),
                                result.image_size, seen)
-    shared = in_cells(both, np.stack(np.meshgrid(pd.xs, pd.ys), axis=-1), result.image_size)
+    shared = grid_in_cells(both, pd.xs, pd.ys, result.image_size)
     looked = pd.diff[shared & np.isfinite(pd.diff)]
     elsewhere = pd.diff[~shared & np.isfinite(pd.diff)]
     text = (f"Each pixel's ray through the first half's calibration, projected through the second's, after a "
