@@ -161,10 +161,10 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
     with the ``distortion`` preset asked for);
     ``'depth'`` is the depth-aided method. The model is chosen by the data where an option is
     'auto' (the defaults): the depth convention, the distortion terms, the depth error terms and
-    the squares the depth planes use; see ``CalibrationOptions`` for the choices, and ``result.model`` for what was
-    chosen and why. ``loss`` 'huber' or 'cauchy' makes the fit robust to misdetected corners.
-    Raises CalibrationError with the reason when the options are wrong or the views cannot be
-    calibrated; check ``result.verdict`` before trusting a result.
+    the squares the depth planes use; see ``CalibrationOptions`` for the choices, and
+    ``result.model`` for what was chosen and why. ``loss`` 'huber' or 'cauchy' makes the fit
+    robust to misdetected corners. Raises CalibrationError with the reason when the options are
+    wrong or the views cannot be calibrated; check ``result.verdict`` before trusting a result.
     """
     check_arguments(views, board, image_size, depth_units, min_views, progress)
     options = CalibrationOptions(method, depth_convention, depth_units, depth_bias, distortion, loss, plane_squares,
@@ -266,8 +266,8 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
         reasons.append(why)
         if convention != "z":
             white, unfitted = _white_planes(samples, intr, convention)
-    elif evidence.doubt(asked):
-        reasons.append(evidence.doubt(asked))
+    elif (doubt := evidence.doubt(asked)) is not None:
+        reasons.append(doubt)
     for why in reasons:
         say(why)
     for k, why in sorted({**failed, **unfitted}.items()):
