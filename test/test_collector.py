@@ -65,12 +65,25 @@ def test_a_sweep_adds_views_and_progress_only_rises(sweep_frames):
         assert history[-1, AXES.index(a)] > 0.3, a
     p = col.progress()
     assert p["frames"] == len(sweep_frames) and p["views"] == len(col.views)
-    assert not p["good_enough"]  # 8 poses at 0.5..0.85 m: too few views, too little depth range
+    assert not p["good_enough"]  # 8 poses at 0.5..0.85 m: too few views
+    assert p["axes"]["depth"]["progress"] > 0.8   # 1.7:1 in distance, where 1.8:1 fills it
     # what is still short, the least covered first, says what to do about it
     least = sorted((a["progress"], name) for name, a in p["axes"].items())[:2]
-    assert least[0][1] == "depth" and collector.still_short(p) == "; ".join(
+    assert collector.still_short(p) == "; ".join(
         f"{collector.LABELS[name]} {share:.0%}: {collector.WHAT_TO_DO[name]}" for share, name in least), \
         collector.still_short(p)
+
+
+@pytest.mark.parametrize("near, far, full", [(0.5, 0.95, True), (0.75, 1.4, True), (0.7, 1.1, False)])
+def test_the_distance_axis_is_full_at_distances_1_8_to_1_apart(near, far, full):
+    # the depth's offset and the focal length are told apart by the spread of 1/distance: a 1.8:1
+    # ratio fills the axis near or far, a smaller one does not
+    col = ViewCollector(BOARD)
+    out = _feed(col, [_frame(_pose((100, 100), z), seed=i) for i, z in enumerate((near, far))], dt=2.0)
+    assert all(o.accepted for o in out), [o.reason for o in out]
+    progress = col.progress()["axes"]["depth"]["progress"]
+    assert (progress == 1.0) == full, progress
+    assert progress > 0.5
 
 
 def test_tilt_is_measured_from_the_depth():
