@@ -86,6 +86,18 @@ def test_the_distance_axis_is_full_at_distances_1_8_to_1_apart(near, far, full):
     assert progress > 0.5
 
 
+def test_a_board_filling_most_of_the_image_can_cover_x_and_y():
+    # a wide board (8x6 corners, 146x114 px at 0.7 m in 200x200) slid from side to side and top
+    # to bottom: camera_calibration's centre less half a square of its area spans 0.57 of X (0.7 fills it)
+    col = ViewCollector(BOARD, CollectorConfig(stills=True))
+    frames = [_frame(_pose((u, v), 0.7), seed=i) for i, (u, v) in
+              enumerate((u, v) for u in range(70, 131, 12) for v in range(50, 151, 20))]
+    out = _feed(col, frames)
+    assert sum(o.accepted for o in out) >= 8
+    axes = col.progress()["axes"]
+    assert axes["x"]["progress"] == 1.0 and axes["y"]["progress"] == 1.0, axes
+
+
 def test_tilt_is_measured_from_the_depth():
     still = [_frame(_pose((100, 100), 0.6, 35, (0, 1)), seed=s) for s in (1, 2)]
     out = _feed(ViewCollector(BOARD), still)
