@@ -92,8 +92,9 @@ class CollectorConfig:
     (camera_calibration's 0.7, 0.7, 0.4, 0.5, then depth and tilt). The distance axis is
     log(distance / near) / log(far / near) over ``depth_range``: its span of 0.25 of the 0.3-3 m
     range asks for boards at two distances 1.8:1 apart, near or far (the simulated camera's 14
-    views at 0.5 to 0.85 m give its 20 mm depth offset to 0.1 mm and fx to 0.03 %). ``stills``: every frame is a
-    still (no stream to measure the board's speed in), so only the frame's own evidence of motion counts.
+    views at 0.5 to 0.85 m give its 20 mm depth offset to 0.1 mm and fx to 0.03 %). ``stills``:
+    every frame is a still (no stream to measure the board's speed in), so only the frame's own
+    evidence of motion counts.
     ``exposure_s``: how long a frame is exposed (all phases of a multi-phase ToF
     frame), and ``max_blur_px`` how far the board may move in that time (camera_calibration's
     ``max_chessboard_speed``, in physical units: 5 ms and 1.5 px allow 300 px/s). The default
@@ -411,8 +412,8 @@ class ViewCollector:
         angle = np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))
         skew = 2 * abs(np.pi / 2 - angle)
         near, far = cfg.depth_range
-        # Logarithmic: an offset in the depth and the focal length are told apart by how much
-        # 1/distance varies, which a ratio of distances gives alike near and far.
+        # Logarithmic: the focal-length error a depth offset left unresolved causes goes with
+        # 1 - nearest / farthest distance, a ratio, alike near and far.
         depth = np.log(max(float(np.nanmedian(z)), near) / near) / np.log(far / near)
         tilt = _tilt_deg(corners, z, self.board, w, h) / cfg.max_tilt_deg
         return np.clip(np.array([x, y, size, skew, depth, tilt], dtype=float), 0.0, 1.0)
