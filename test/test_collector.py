@@ -76,8 +76,8 @@ def test_a_sweep_adds_views_and_progress_only_rises(sweep_frames):
 
 @pytest.mark.parametrize("near, far, full", [(0.5, 0.95, True), (0.75, 1.4, True), (0.7, 1.1, False)])
 def test_the_distance_axis_is_full_at_distances_1_8_to_1_apart(near, far, full):
-    # the depth's offset and the focal length are told apart by the spread of 1/distance: a 1.8:1
-    # ratio fills the axis near or far, a smaller one does not
+    # the focal-length error a depth offset leaves goes with the ratio of the boards' distances:
+    # a 1.8:1 ratio fills the axis near or far, a smaller one does not
     col = ViewCollector(BOARD)
     out = _feed(col, [_frame(_pose((100, 100), z), seed=i) for i, z in enumerate((near, far))], dt=2.0)
     assert all(o.accepted for o in out), [o.reason for o in out]

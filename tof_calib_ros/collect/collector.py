@@ -404,7 +404,7 @@ class ViewCollector:
         # side, 1 against the other. camera_calibration shrinks the centre's range by the side of
         # a square of the board's area instead, which an oblong board filling a low-resolution
         # image can never span.
-        m = self.config.border_px
+        m = cfg.border_px
         first, last = outline.min(axis=0), outline.max(axis=0)
         x, y = (first - m) / np.maximum(np.array([w - 1, h - 1]) - 2 * m - (last - first), 1.0)
         size = np.sqrt(area / (w * h))
