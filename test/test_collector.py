@@ -260,6 +260,29 @@ def test_max_views_and_reset(sweep_frames):
     assert all(a["progress"] == 0 for a in p["axes"].values())
 
 
+def test_enough_views_by_their_number_where_the_board_cannot_fill_the_size_axis():
+    # A small board far away (1.3 to 2.6 m; as a 5x7 board on a wide-angle ToF camera, whose
+    # depth fails before the board is near enough) never fills Size: as camera_calibration, 40
+    # views are enough all the same, and fewer are not; a full set of fewer is enough too.
+    frames = [_frame(pose, seed=i) for i, pose in
+              enumerate(sim.random_poses(CAM, BOARD, 70, np.random.default_rng(3), distance=(1.3, 2.6)))]
+    col = ViewCollector(BOARD, CollectorConfig(stills=True))
+    good_at = []
+    for i, f in enumerate(frames):
+        col.add(f.amplitude, f.depth, float(i))
+        good_at.append((len(col.views), col.progress()["good_enough"]))
+    p = col.progress()
+    assert p["views"] > collector.ENOUGH_VIEWS, p["views"]
+    assert p["axes"]["size"]["progress"] < 0.8 and collector.still_short(p).startswith("Size"), p["axes"]
+    assert all(good == (n >= collector.ENOUGH_VIEWS) for n, good in good_at), good_at
+    full = ViewCollector(BOARD, CollectorConfig(stills=True, max_views=12))
+    good_at = []
+    for i, f in enumerate(frames[:20]):
+        full.add(f.amplitude, f.depth, float(i))
+        good_at.append((len(full), full.progress()["good_enough"]))
+    assert all(good == (n == 12) for n, good in good_at) and good_at[-1] == (12, True), good_at
+
+
 def test_a_full_set_swaps_its_most_redundant_view_for_a_new_one():
     # three views near one pose and one far: the fourth pose replaces one of the close three
     poses = [((100, 100), 0.7, 0), ((102, 100), 0.7, 0), ((100, 102), 0.7, 0), ((60, 60), 0.9, 30),

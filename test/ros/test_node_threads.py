@@ -103,3 +103,19 @@ def test_the_diagnostics_show_a_running_calibration_s_stage_then_its_result(ros,
         assert node.status().message.startswith("calibrated (fx=")
     finally:
         node.destroy_node()
+
+
+def test_the_diagnostics_say_a_full_set_is_enough_and_what_would_still_help(ros):
+    # views.max 6 below camera_calibration's 40: the full set is enough, axes short or not
+    node = node_module.CalibrationNode(context=ros[1], parameter_overrides=[
+        Parameter("views.min", value=3), Parameter("views.max", value=6)])
+    try:
+        for i, f in enumerate(_frames(node.board, 10, 5)):
+            node._judge(f.amplitude, f.depth, float(i), node._generation, thorough=True)
+        short = still_short(node.collector.progress())
+        assert len(node.collector) == 6 and short, short
+        status = node.status()
+        assert status.level == node_module.DiagnosticStatus.OK
+        assert status.message == f"enough views to calibrate (6); more would still help: {short}"
+    finally:
+        node.destroy_node()

@@ -78,6 +78,9 @@ ARTEFACT_MIN_M = 0.1
 # A full set swaps a view only for one this many times farther from the rest: each swap costs an
 # accurate detection, and swaps for a marginal gain would churn on every frame of a long recording.
 SWAP_GAIN = 1.5
+# Views that are enough however the axes stand (camera_calibration's 40): a small board on a
+# wide-angle ToF camera cannot fill the Size axis before the camera's depth fails, near.
+ENOUGH_VIEWS = 40
 
 
 def _real(value: object) -> bool:
@@ -256,7 +259,8 @@ class ViewCollector:
 
     def progress(self) -> dict:
         """Per axis the covered range [lo, hi] of kept views and its progress 0..1 towards the
-        axis' span; frame and view counts; the last frame's reason; whether to calibrate now."""
+        axis' span; frame and view counts; the last frame's reason; whether to calibrate now:
+        every axis full, or ``ENOUGH_VIEWS`` views (a full set, if smaller) as in camera_calibration."""
         cfg = self.config
         params = np.array(self._params).reshape(-1, len(AXES))
         axes = {}
@@ -265,7 +269,8 @@ class ViewCollector:
             if name in _FROM_ZERO:
                 lo = 0.0
             axes[name] = {"lo": lo, "hi": hi, "progress": min((hi - lo) / cfg.spans[i], 1.0)}
-        good = len(params) >= cfg.min_views and all(a["progress"] >= 1.0 for a in axes.values())
+        full = all(a["progress"] >= 1.0 for a in axes.values())
+        good = len(params) >= cfg.min_views and (full or len(params) >= min(ENOUGH_VIEWS, cfg.max_views))
         return {"axes": axes, "frames": self._frames, "views": len(params),
                 "last_reason": self._last_reason, "good_enough": good}
 

@@ -520,10 +520,12 @@ class CalibrationNode(Node):
             status.message = (f"calibrated (fx={self.result.K[0, 0]:.2f} fy={self.result.K[1, 1]:.2f}, "
                               f"{len(self.result.views)} views); still collecting")
         else:
-            status.level = DiagnosticStatus.OK if progress["good_enough"] else DiagnosticStatus.WARN
-            status.message = "enough views to calibrate" if progress["good_enough"] else (
-                f"collecting views ({progress['views']} of at least {need})"
-                + (f": {short}" if short else ""))
+            good = progress["good_enough"]
+            status.level = DiagnosticStatus.OK if good else DiagnosticStatus.WARN
+            status.message = (f"enough views to calibrate ({progress['views']})" if good
+                              else f"collecting views ({progress['views']} of at least {need})")
+            if short:   # enough by their number: what would still help
+                status.message += f"; more would still help: {short}" if good else f": {short}"
         values = {k: v for k, v in progress.items() if not isinstance(v, dict) and k != "last_reason"}
         values["frames received (amplitude, depth)"] = f"{self.received[0]}, {self.received[1]}"
         values.update({f"coverage.{k}": a["progress"] for k, a in progress["axes"].items()})
