@@ -469,10 +469,10 @@ def test_the_board_picture_rings_a_corner_under_the_reason_text(accepted):
 
 
 def test_the_board_picture_says_what_to_do_next_until_the_views_are_enough():
-    from tof_calib_ros.collect.board_picture import KEPT, PANEL_WIDTH, REFUSED, draw
+    from tof_calib_ros.collect.board_picture import BAR_STEP, COUNT_PX, KEPT, PANEL_WIDTH, REFUSED, draw
 
     amplitude = np.tile(np.linspace(100, 2000, 200), (200, 1)).astype(np.uint16)
-    below_bars = slice(360, None)   # the panel under its last bar (six bars, 50 px apart from 30)
+    below_bars = slice(COUNT_PX + len(AXES) * BAR_STEP + 16, None)   # the panel under its last bar
 
     def panel_colours(depth_progress: float, good: bool) -> tuple[bool, bool]:
         progress = {"views": 12, "good_enough": good,
@@ -483,3 +483,27 @@ def test_the_board_picture_says_what_to_do_next_until_the_views_are_enough():
     assert panel_colours(0.3, False) == (True, False)   # "next: hold it at more distances, near and far"
     assert panel_colours(1.0, True) == (False, True)    # "enough to calibrate"
     assert panel_colours(1.0, False) == (False, False)  # every axis full, too few views: the count says so
+
+
+def test_the_board_picture_of_a_blank_frame_says_why_it_is_no_view():
+    from tof_calib_ros.collect.board_picture import TEXT_BAND_PX, draw, scale_for
+
+    blank = np.zeros((200, 200), np.uint16)   # a covered lens
+    outcome = ViewCollector(BOARD).add(blank, blank, 0.0)
+    assert not outcome.accepted and "constant" in outcome.reason, outcome.reason
+    progress = {"views": 0, "good_enough": False, "axes": {name: {"progress": 0.0} for name in AXES}}
+    frame = draw(blank, outcome, progress)[:, :200 * scale_for(200)]
+    assert frame[:TEXT_BAND_PX].max() == 255 and frame[TEXT_BAND_PX:].max() == 0   # its reason, over black
+
+
+@pytest.mark.parametrize("axis", AXES)
+def test_the_board_picture_s_advice_for_each_axis_fits_a_200x200_sensor_s_picture(axis):
+    from tof_calib_ros.collect.board_picture import PANEL_WIDTH, REFUSED, draw
+
+    amplitude = np.tile(np.linspace(100, 2000, 200), (200, 1)).astype(np.uint16)
+    progress = {"views": 3, "good_enough": False,
+                "axes": {name: {"progress": 0.2 if name == axis else 1.0} for name in AXES}}
+    panel = draw(amplitude, collector.Outcome(False, "x"), progress)[:, -PANEL_WIDTH:].astype(int)
+    rows = np.flatnonzero((np.abs(panel - np.array(REFUSED)).max(axis=2) < 60).any(axis=1))
+    # the advice's lines, under the short axis' orange bar, end above the picture's last rows
+    assert len(rows) and rows[-1] < panel.shape[0] - 3, (axis, rows[-5:], panel.shape)

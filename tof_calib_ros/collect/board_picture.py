@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from ..core.detection import tone_map
+from ..core.errors import CalibrationError
 from .collector import AXES, LABELS, WHAT_TO_DO, Outcome, short_axes
 
 MIN_HEIGHT = 400        # px: a 200x200 sensor's frame is enlarged twice
@@ -21,6 +22,10 @@ PANEL_WIDTH = 220       # px of bars beside the image
 KEPT, REFUSED, TEXT, BAR, BAR_FULL = (60, 200, 60), (0, 150, 255), (255, 255, 255), (90, 90, 90), (60, 200, 60)
 TEXT_LINES, LINE_PX = 3, 18   # the reason, wrapped, over the top of the frame
 TEXT_BAND_PX = 8 + LINE_PX * TEXT_LINES
+# The panel: the view count, a label and a bar per axis BAR_STEP px apart, then what to do next,
+# all within MIN_HEIGHT: the longest advice takes three lines, whose third fell below a 200x200
+# sensor's picture with the bars 50 px apart.
+COUNT_PX, BAR_STEP, NEXT_PX = 30, 46, 36
 
 
 def scale_for(height: int) -> int:
@@ -38,7 +43,11 @@ def enlarged(points: np.ndarray, k: int) -> np.ndarray:
 def draw(amplitude: np.ndarray, outcome: Outcome, progress: dict) -> np.ndarray:
     """A BGR uint8 picture: the frame with its corners and reason, and the coverage panel."""
     k = scale_for(amplitude.shape[0])
-    gray = cv2.resize(tone_map(amplitude), None, fx=k, fy=k, interpolation=cv2.INTER_NEAREST)
+    try:
+        mapped = tone_map(amplitude)
+    except CalibrationError:   # a blank frame (a covered lens): shown black under its reason, not skipped
+        mapped = np.zeros(amplitude.shape[:2], np.uint8)
+    gray = cv2.resize(mapped, None, fx=k, fy=k, interpolation=cv2.INTER_NEAREST)
     frame = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     colour = KEPT if outcome.accepted else REFUSED
     _text_lines(frame, outcome.reason, (255, 255, 255) if outcome.accepted or outcome.corners is None else colour)
@@ -46,20 +55,21 @@ def draw(amplitude: np.ndarray, outcome: Outcome, progress: dict) -> np.ndarray:
         for x, y in enlarged(outcome.corners, k):
             cv2.circle(frame, (int(round(x)), int(round(y))), max(3, k + 1), colour, 2, cv2.LINE_AA)
     panel = np.zeros((frame.shape[0], PANEL_WIDTH, 3), np.uint8)
-    y = 30
+    y = COUNT_PX
     cv2.putText(panel, f"views {progress['views']}", (10, y), cv2.FONT_HERSHEY_SIMPLEX, 0.7, TEXT, 2, cv2.LINE_AA)
     for name in AXES:
-        y += 50
+        y += BAR_STEP
         share = float(progress["axes"][name]["progress"])
         cv2.putText(panel, LABELS[name], (10, y - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.55, TEXT, 1, cv2.LINE_AA)
         cv2.rectangle(panel, (10, y), (PANEL_WIDTH - 10, y + 14), BAR, -1)
         cv2.rectangle(panel, (10, y), (10 + int(share * (PANEL_WIDTH - 20)), y + 14),
                       BAR_FULL if share >= 1.0 else REFUSED, -1)
     if progress.get("good_enough"):
-        cv2.putText(panel, "enough to calibrate", (10, y + 45), cv2.FONT_HERSHEY_SIMPLEX, 0.55, KEPT, 1, cv2.LINE_AA)
+        cv2.putText(panel, "enough to calibrate", (10, y + NEXT_PX), cv2.FONT_HERSHEY_SIMPLEX, 0.55, KEPT, 1,
+                    cv2.LINE_AA)
     elif short := short_axes(progress):   # what to do next, for the least covered axis
         for i, line in enumerate(_wrapped("next: " + WHAT_TO_DO[short[0][0]], PANEL_WIDTH // 8)):
-            cv2.putText(panel, line, (10, y + 36 + LINE_PX * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, REFUSED, 1,
+            cv2.putText(panel, line, (10, y + NEXT_PX + LINE_PX * i), cv2.FONT_HERSHEY_SIMPLEX, 0.45, REFUSED, 1,
                         cv2.LINE_AA)
     return np.hstack([frame, panel])
 

@@ -56,7 +56,7 @@ LABELS = {"x": "X", "y": "Y", "size": "Size", "skew": "Skew", "depth": "Distance
 WHAT_TO_DO = {
     "x": "move the board across the image, left to right",
     "y": "move it from the image's top to its bottom",
-    "size": "bring it nearer, to fill more of the image",
+    "size": "bring it nearer, or take a larger board where the depth fails that near",
     "skew": "tilt it about a diagonal, so its corners are not square in the image",
     "depth": "hold it at more distances, near and far",
     "tilt": "tilt it further towards or away from the camera",
