@@ -524,7 +524,7 @@ class CalibrationNode(Node):
             status.level = DiagnosticStatus.OK if good else DiagnosticStatus.WARN
             status.message = (f"enough views to calibrate ({progress['views']})" if good
                               else f"collecting views ({progress['views']} of at least {need})")
-            if short:   # enough by their number: what would still help
+            if short:   # what to do next while collecting; what would still help when enough by their number
                 status.message += f"; more would still help: {short}" if good else f": {short}"
         values = {k: v for k, v in progress.items() if not isinstance(v, dict) and k != "last_reason"}
         values["frames received (amplitude, depth)"] = f"{self.received[0]}, {self.received[1]}"
