@@ -93,3 +93,15 @@ def test_a_lens_that_folds_back_inside_the_image_is_found_where_it_folds():
     assert fold_distance(np.array([f, f, 256.0, 212.0, k1, k2, 0, 0, k3]), (512, 424)) == pytest.approx(radius, abs=1.0)
     assert fold_distance(np.array([f, f, 256.0, 212.0, -0.3, 0.1, 1e-3, 1e-3, 0]), (512, 424)) is None
     assert fold_distance(np.array([f, f, 256.0, 212.0, k1, k2, 0, 0, k3]), (128, 106)) is None
+
+
+def test_a_fold_in_the_image_corner_alone_is_found():
+    """A strong barrel lens (the Azure Kinect depth camera's, fitted by plumb_bob over too short
+    a radius) that folds only in the corner the principal point lies farthest from: between the
+    rays searched at every 4 degrees, the one to that corner found it."""
+    k1, k2, k3 = -0.3297, 0.1407, -0.0339
+    u = min(r.real for r in np.roots([7 * k3, 5 * k2, 3 * k1, 1]) if abs(r.imag) < 1e-12 and r.real > 0)
+    radius = 504.0 * np.sqrt(u) * (1 + k1 * u + k2 * u ** 2 + k3 * u ** 3)
+    assert np.hypot(320.5, 288.5) < radius < np.hypot(322.0, 329.5)   # only the top-left corner's pixels lie past it
+    lens = np.array([504.0, 504.0, 321.5, 329.0, k1, k2, 0, 0, k3])
+    assert fold_distance(lens, (640, 576)) == pytest.approx(radius, abs=1.0)

@@ -1,5 +1,6 @@
 """The synthetic ToF renderer against its own exact ground truth."""
 import time
+import warnings
 
 import cv2
 import numpy as np
@@ -258,6 +259,21 @@ def test_large_image_is_fast():
     f = sim.render(camera, board, *pose, noise=sim.Noise(depth=0.002, amplitude=0.001))
     assert time.perf_counter() - t0 < 1.0
     assert f.amplitude.shape == (576, 640) and f.depth.dtype == np.float32
+
+
+def test_a_strong_real_lens_renders_exact_rays_and_a_folding_one_is_refused():
+    # the Azure Kinect depth camera's lens (its rational model, fitted by plumb_bob): 90 px of
+    # barrel at the image's corners
+    strong = sim.SimCamera(np.array([504.0, 504.0, 321.5, 329.0, -0.3225, 0.1234, 1.2e-4, 6e-6, -0.0243]), 640, 576)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        xy = sim._centre_normalized(strong.params.tobytes(), strong.width, strong.height).reshape(-1, 2)
+    back = cam.project(np.column_stack([xy, np.ones(len(xy))]), strong.params).pixels
+    U, V = np.meshgrid(np.arange(strong.width), np.arange(strong.height))
+    assert np.abs(back - np.stack([U.ravel(), V.ravel()], 1)).max() < 1e-6
+    # fitted over too short a radius, it folds back in the top-left corner: no ray reaches those pixels
+    with pytest.raises(CalibrationError, match="folds back inside the 640x576 image, 451 px"):
+        sim.SimCamera(np.array([504.0, 504.0, 321.5, 329.0, -0.3297, 0.1407, 1.2e-4, 6e-6, -0.0339]), 640, 576)
 
 
 def test_bad_input():

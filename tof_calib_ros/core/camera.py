@@ -108,16 +108,17 @@ def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float =
     # model folds, near the corners of wide images, a few never converge and would otherwise keep
     # the whole image iterating to max_iter: 0.4 s for a 512x424 image).
     active = np.arange(len(xy))
-    for _ in range(max_iter):
-        xd, yd, dxy, _ = _distort(xy[active, 0], xy[active, 1], D, True)
-        err = np.stack([xd, yd], axis=1) - target[active]
-        moving = ~np.all(np.abs(err * scale) < tol_px, axis=1)
-        if not moving.any():
-            break
-        active, err, dxy = active[moving], err[moving], dxy[moving]
-        a, b, c, d = dxy[:, 0, 0], dxy[:, 0, 1], dxy[:, 1, 0], dxy[:, 1, 1]
-        det = a * d - b * c
-        xy[active] -= np.stack([d * err[:, 0] - b * err[:, 1], a * err[:, 1] - c * err[:, 0]], axis=1) / det[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):   # past a fold Newton runs off: no ray is there
+        for _ in range(max_iter):
+            xd, yd, dxy, _ = _distort(xy[active, 0], xy[active, 1], D, True)
+            err = np.stack([xd, yd], axis=1) - target[active]
+            moving = ~np.all(np.abs(err * scale) < tol_px, axis=1)
+            if not moving.any():
+                break
+            active, err, dxy = active[moving], err[moving], dxy[moving]
+            a, b, c, d = dxy[:, 0, 0], dxy[:, 0, 1], dxy[:, 1, 0], dxy[:, 1, 1]
+            det = (a * d - b * c)[:, None]
+            xy[active] -= np.stack([d * err[:, 0] - b * err[:, 1], a * err[:, 1] - c * err[:, 0]], axis=1) / det
     return xy
 
 
@@ -128,13 +129,16 @@ def fold_distance(params: np.ndarray, image_size: tuple[int, int], directions: i
     fitted to views that leave the image's corners out, high-order terms (k3) can bend back
     before them, and a pixel there then has no ray or two (on 7 real Kinect v2 views, a k3 of
     -2 that fit them to 0.08 px put the views left out 25 px off). Searched along rays from the
-    axis, out to ``reach`` (normalised units) or until the model leaves the image."""
+    axis, out to ``reach`` (normalised units) or until the model leaves the image; those to the
+    image's corners too, where a barrel lens is the flattest, and folds first."""
     fx, fy, cx, cy = params[:4]
-    angle = np.linspace(0.0, 2 * np.pi, directions, endpoint=False)[:, None]
+    w, h = image_size
+    corners = np.arctan2((np.array([-0.5, -0.5, h - 0.5, h - 0.5]) - cy) / fy,
+                         (np.array([-0.5, w - 0.5, -0.5, w - 0.5]) - cx) / fx)
+    angle = np.r_[np.linspace(0.0, 2 * np.pi, directions, endpoint=False), corners][:, None]
     r = np.linspace(0.0, reach, steps + 1)[None, 1:]
     xd, yd, dxy, _ = _distort(r * np.cos(angle), r * np.sin(angle), np.asarray(params[4:9], dtype=float), True)
     u, v = fx * xd + cx, fy * yd + cy
-    w, h = image_size
     inside = (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
     before_leaving = np.cumsum(~inside, axis=1) == 0
     folded = (dxy[..., 0, 0] * dxy[..., 1, 1] - dxy[..., 0, 1] * dxy[..., 1, 0] <= 0) & before_leaving

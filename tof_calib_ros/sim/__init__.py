@@ -52,6 +52,11 @@ class SimCamera:
         if int(self.width) < 2 or int(self.height) < 2:
             raise CalibrationError(
                 f"image must be at least 2x2 pixels, got {self.width}x{self.height}")
+        fold = cam.fold_distance(p, (int(self.width), int(self.height)))
+        if fold is not None:
+            raise CalibrationError(
+                f"the lens folds back inside the {self.width}x{self.height} image, {fold:.0f} px from the principal "
+                "point: past it no ray reaches a pixel, as none of a real lens would")
         object.__setattr__(self, "params", p)
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
