@@ -482,7 +482,8 @@ def faults(log=print) -> dict:
              ("[284.4, 0.0, 100.0, 0.0, 284.4", "[284.4, 150.0, 100.0, 0.0, 284.4"),
              ("plumb_bob", "equidistant"),
              ("plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [-0.1, 0.02, 0, 0, 0]}",
-              "rational_polynomial\ndistortion_coefficients: {rows: 1, cols: 8, data: [0, 0, 0, 0, 0, 0, 0, 0]}")]
+              "rational_polynomial\ndistortion_coefficients: {rows: 1, cols: 14, data: [" + ", ".join(["0"] * 14)
+              + "]}")]
     anchors = "a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n" + "".join(
         f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]\n" for i in range(1, 9))
     files = [good.replace(a, z, 1) for a, z in edits] + [anchors + good.replace("data: [-0.1, 0.02, 0, 0, 0]",

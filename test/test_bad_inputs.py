@@ -126,10 +126,13 @@ projection_matrix: {rows: 3, cols: 4, data: [284.4, 0.0, 100.0, 0.0, 0.0, 284.4,
     ("0.0, 0.0, 1.0]}\ndistortion", "0.0, 0.0, 0.0]}\ndistortion", "must be [0, fy, cy] [0, 0, 1]"),
     ("0.0, 0.0, 1.0]}\ndistortion", "0.0, 0.0, 2.0]}\ndistortion", "must be [0, fy, cy] [0, 0, 1]"),
     ("[284.4, 0.0, 100.0, 0.0, 284.4", "[284.4, 150.0, 100.0, 0.0, 284.4", "skew K[0][1]=150"),
-    ("plumb_bob", "equidistant", "distortion model 'equidistant' (the check reads plumb_bob only)"),
+    ("plumb_bob", "equidistant",
+     "distortion model 'equidistant' (the check reads plumb_bob and rational_polynomial only)"),
+    ("cols: 5, data: [-0.1, 0.02, 0.0, 0.0, 0.0]", "cols: 6, data: [-0.1, 0.02, 0.0, 0.0, 0.0, 0.1]",
+     "6 distortion terms (plumb_bob has 5)"),
     ("plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [-0.1, 0.02, 0.0, 0.0, 0.0]}",
-     "rational_polynomial\ndistortion_coefficients: {rows: 1, cols: 8, data: [-0.1, 0.02, 0, 0, 0, 0.1, 0, 0]}",
-     "rational_polynomial"),
+     "rational_polynomial\ndistortion_coefficients: {rows: 1, cols: 14, data: [" + ", ".join(["0.1"] * 14) + "]}",
+     "14 distortion terms (rational_polynomial has 8)"),
 ])
 def test_check_refuses_a_calibration_it_would_misread(tmp_path: Path, capsys, old: str, new: str, reason: str) -> None:
     path = tmp_path / "calibration.yaml"

@@ -13,7 +13,7 @@ from tof_calib_ros.core.board import Board
 from tof_calib_ros.sim import bound
 
 BOARD = Board(11, 11, 0.05)
-LENS = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0.0]), 200, 200)
+LENS = sim.SimCamera(np.array([284.4, 284.4, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0.0, 0.0, 0.0, 0.0]), 200, 200)
 WIGGLE = sim.Noise(depth=0.01, offset=0.02, dark_offset=0.015, wiggle_amplitude=0.015, wiggle_period=1.87,
                    wiggle_phase=0.7)
 SUBGRID = np.array([r * 11 + c for r in (0, 2, 4, 6, 8, 10) for c in (0, 2, 4, 6, 8, 10)])
@@ -40,8 +40,8 @@ def test_the_depth_rows_are_the_derivatives_of_what_the_sensor_reads():
     d_int, d_pose, terms = bound._depth_rows(sc, R, tvec, rvec)
     pix, sigma, dark = bound.depth_pixels(sc, rvec, tvec)
     assert len(pix) > 5000 and np.allclose(terms[:, 0], 1 / sigma) and np.allclose(terms[:, 1], dark / sigma)
-    for j, h in enumerate([1e-3] * 4 + [1e-6] * 5):
-        step = np.eye(9)[j] * h
+    for j, h in enumerate([1e-3] * 4 + [1e-6] * 8):
+        step = np.eye(12)[j] * h
         fd = (reads(sc, pix, LENS.params + step, R, tvec) - reads(sc, pix, LENS.params - step, R, tvec)) / (2 * h)
         assert np.max(np.abs(fd / sigma - d_int[:, j])) < 1e-5 * np.max(np.abs(fd / sigma)), f"intrinsic {j}"
     h = 1e-6   # the wiggle's period, for a method not told the modulation frequency
@@ -71,14 +71,15 @@ def test_the_3d_error_rows_are_the_papers_error_near_the_truth():
     sc = scene(3, 40, 5)
     b = bound.Bound(sc)
     g = np.random.default_rng(0)
-    delta = np.r_[g.normal(0, [0.3, 0.3, 0.2, 0.2, 1e-3, 1e-3, 1e-4, 1e-4, 1e-3]), g.normal(0, 1e-4, 18)]
+    delta = np.r_[g.normal(0, [0.3, 0.3, 0.2, 0.2, 1e-3, 1e-3, 1e-4, 1e-4, 1e-3, 1e-3, 1e-3, 1e-3]),
+                  g.normal(0, 1e-4, 18)]
     poses, linear = [], []
     for i, ((rvec, tvec), (d_int, d_pose)) in enumerate(zip(sc.poses, b._errors)):
-        d = delta[9 + 6 * i:15 + 6 * i]
+        d = delta[12 + 6 * i:18 + 6 * i]
         R = cv2.Rodrigues(d[:3])[0] @ cv2.Rodrigues(rvec)[0]
         poses.append((cv2.Rodrigues(R)[0].ravel(), tvec + d[3:]))
-        linear.append(np.linalg.norm((d_int @ delta[:9] + d_pose @ d).reshape(-1, 3), axis=1).mean())
-    exact = bound.mean_3d_error(LENS.params + delta[:9], poses, sc.poses, LENS, BOARD)
+        linear.append(np.linalg.norm((d_int @ delta[:12] + d_pose @ d).reshape(-1, 3), axis=1).mean())
+    exact = bound.mean_3d_error(LENS.params + delta[:12], poses, sc.poses, LENS, BOARD)
     assert exact > 0.1 and np.mean(linear) * 1e3 == pytest.approx(exact, rel=1e-3)
 
 

@@ -17,6 +17,7 @@ from tof_calib_ros.core.result import CalibrationResult, ViewReport
 from tof_calib_ros.files import calibration_file as cf
 from tof_calib_ros.files.calibration_file import (
     CalibrationFileError,
+    camera_yaml,
     encode_views,
     read_camera_yaml,
     save_views,
@@ -83,6 +84,16 @@ def test_yaml_round_trip_is_exact(tmp_path: Path) -> None:
     assert cam.K.shape == (3, 3) and cam.D.shape == (5,) and cam.P.shape == (3, 4)
 
 
+def test_a_rational_lens_is_written_as_rational_polynomial_and_read_back(tmp_path: Path) -> None:
+    wide = np.array([4.7247, 3.2092, 1.2e-4, 5.9e-6, 0.1706, 5.0559, 4.7758, 0.8865])
+    text = camera_yaml({"K": K, "D": wide, "image_size": (512, 512)}, "azure_wfov").decode()
+    assert "distortion_model: rational_polynomial\ndistortion_coefficients:\n  rows: 1\n  cols: 8\n" in text
+    cam = read_camera_yaml(write_camera_yaml(tmp_path / "wide.yaml", {"K": K, "D": wide, "image_size": (512, 512)},
+                                             "azure_wfov"))
+    assert cam.distortion_model == "rational_polynomial"
+    np.testing.assert_array_equal(cam.D, wide)
+
+
 def test_reads_what_camera_calibration_parsers_writes(tmp_path: Path) -> None:
     # yaml-cpp style: integers for whole numbers, 1e-05 without a dot (text to PyYAML's YAML 1.1)
     path = tmp_path / "cam.yaml"
@@ -145,6 +156,7 @@ def test_unreadable_yaml_file(tmp_path: Path) -> None:
     (object(), "cam", "need K, D and image_size to write a camera file; missing: K, D, image_size"),
     ({"K": K[:2], "D": D, "image_size": (640, 480)}, "cam", "K must be 3x3, got shape (2, 3)"),
     ({"K": K, "D": D[:4], "image_size": (640, 480)}, "cam", "D must hold the 5 plumb_bob terms"),
+    ({"K": K, "D": np.r_[D, 0.1], "image_size": (640, 480)}, "cam", "D must hold the 5 plumb_bob terms"),
     ({"K": K * np.nan, "D": D, "image_size": (640, 480)}, "cam", "K or D has NaN or inf values"),
     ({"K": K, "D": D, "image_size": (0, 480)}, "cam", "image size must be positive, got 0x480"),
     ({"K": K, "D": D, "image_size": 640}, "cam", "K, D must be numbers and image_size (width, height)"),

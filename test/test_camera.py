@@ -1,4 +1,4 @@
-"""The plumb_bob model against OpenCV and finite differences."""
+"""The plumb_bob and rational_polynomial models against OpenCV and finite differences."""
 import cv2
 import numpy as np
 import pytest
@@ -15,6 +15,9 @@ from tof_calib_ros.core.camera import (
 )
 
 PARAMS = np.array([284.4, 280.1, 101.0, 98.0, -0.3, 0.12, 0.001, -0.002, -0.02])
+# the Azure Kinect depth camera's wide lens (its factory model)
+RATIONAL = np.array([252.0, 251.0, 256.5, 254.5, 4.7247, 3.2092, 1.2e-4, 5.9e-6, 0.1706, 5.0559, 4.7758, 0.8865])
+LENSES = pytest.mark.parametrize("params", [np.r_[PARAMS, 0.0, 0.0, 0.0], RATIONAL], ids=["plumb_bob", "rational"])
 
 
 @pytest.fixture
@@ -23,18 +26,23 @@ def points():
     return np.column_stack([rng.uniform(-0.3, 0.3, (60, 2)), rng.uniform(0.5, 2.0, 60)])
 
 
-def test_projection_matches_opencv(points):
-    K, D = split_intrinsics(PARAMS)
+@LENSES
+def test_projection_matches_opencv(points, params):
+    K, D = split_intrinsics(params)
+    assert D.size == (5 if params is not RATIONAL else 8)
     ref, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), K, D)
-    np.testing.assert_allclose(project(points, PARAMS).pixels, ref[:, 0], atol=1e-9)
+    np.testing.assert_allclose(project(points, params).pixels, ref[:, 0], atol=1e-9)
+    np.testing.assert_array_equal(project(points, params[:9] if D.size == 5 else params).pixels,
+                                  project(points, params).pixels)   # a packing of 9 is plumb_bob
 
 
-def test_projection_jacobians_match_finite_differences(points):
-    pr = project(points, PARAMS, jac=True)
+@LENSES
+def test_projection_jacobians_match_finite_differences(points, params):
+    pr = project(points, params, jac=True)
     analytic = np.concatenate([pr.d_k, pr.d_dist], axis=2)
-    for i in range(9):
-        h = 1e-5 * max(abs(PARAMS[i]), 1.0)
-        up, dn = PARAMS.copy(), PARAMS.copy()
+    for i in range(12):
+        h = 1e-5 * max(abs(params[i]), 1.0)
+        up, dn = params.copy(), params.copy()
         up[i] += h
         dn[i] -= h
         fd = (project(points, up).pixels - project(points, dn).pixels) / (2 * h)
@@ -43,14 +51,15 @@ def test_projection_jacobians_match_finite_differences(points):
         up, dn = points.copy(), points.copy()
         up[:, i] += 1e-7
         dn[:, i] -= 1e-7
-        fd = (project(up, PARAMS).pixels - project(dn, PARAMS).pixels) / 2e-7
+        fd = (project(up, params).pixels - project(dn, params).pixels) / 2e-7
         np.testing.assert_allclose(pr.d_point[:, :, i], fd, rtol=1e-5, atol=1e-4)
 
 
-def test_undistortion_inverts_projection_to_1e9_px(points):
-    pix = project(points, PARAMS).pixels
-    xy = undistort_normalized(pix, PARAMS)
-    back = project(np.column_stack([xy, np.ones(len(xy))]), PARAMS).pixels
+@LENSES
+def test_undistortion_inverts_projection_to_1e9_px(points, params):
+    pix = project(points, params).pixels
+    xy = undistort_normalized(pix, params)
+    back = project(np.column_stack([xy, np.ones(len(xy))]), params).pixels
     assert np.abs(back - pix).max() < 1e-9
     np.testing.assert_allclose(xy, points[:, :2] / points[:, 2:], atol=1e-12)
 
@@ -94,14 +103,3 @@ def test_a_lens_that_folds_back_inside_the_image_is_found_where_it_folds():
     assert fold_distance(np.array([f, f, 256.0, 212.0, -0.3, 0.1, 1e-3, 1e-3, 0]), (512, 424)) is None
     assert fold_distance(np.array([f, f, 256.0, 212.0, k1, k2, 0, 0, k3]), (128, 106)) is None
 
-
-def test_a_fold_in_the_image_corner_alone_is_found():
-    """A strong barrel lens (the Azure Kinect depth camera's, fitted by plumb_bob over too short
-    a radius) that folds only in the corner the principal point lies farthest from: between the
-    rays searched at every 4 degrees, the one to that corner found it."""
-    k1, k2, k3 = -0.3297, 0.1407, -0.0339
-    u = min(r.real for r in np.roots([7 * k3, 5 * k2, 3 * k1, 1]) if abs(r.imag) < 1e-12 and r.real > 0)
-    radius = 504.0 * np.sqrt(u) * (1 + k1 * u + k2 * u ** 2 + k3 * u ** 3)
-    assert np.hypot(320.5, 288.5) < radius < np.hypot(322.0, 329.5)   # only the top-left corner's pixels lie past it
-    lens = np.array([504.0, 504.0, 321.5, 329.0, k1, k2, 0, 0, k3])
-    assert fold_distance(lens, (640, 576)) == pytest.approx(radius, abs=1.0)

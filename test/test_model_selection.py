@@ -47,6 +47,42 @@ def test_the_distortion_terms_the_lens_has(lens, expected):
     assert res.ok and abs(res.K[0, 0] / F - 1) < 0.002 and res.std["fx"] < 0.3, (res.K[0, 0], res.std["fx"])
 
 
+# The Azure Kinect depth camera's own lens in its wide mode (its factory model, rational, binned
+# to 512x512): 120 degrees, 250 px of barrel at the corners, which no plumb_bob holds to a pixel.
+WIDE = [252.0, 252.0, 256.5, 254.5, 4.7247, 3.2092, 1.2e-4, 5.9e-6, 0.1706, 5.0559, 4.7758, 0.8865]
+
+
+def test_a_wide_lens_no_polynomial_holds_is_refused_in_plumb_bob_and_calibrated_as_rational():
+    camera = sim.SimCamera(np.array(WIDE), 512, 512)
+    board = Board(8, 6, 0.05)
+    rng = np.random.default_rng(1)
+    views = []
+    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=(0.35, 0.9)):
+        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003), rng=rng, supersample=1)
+        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    # the defaults grow the polynomial presets only, and refuse what they make of it, saying why
+    default = calibrate(views, board)
+    assert default.model.distortion != "rational" and not default.ok
+    assert default.verdict[0].startswith(f"the lens bends more than {default.model.distortion} can follow"), \
+        default.verdict
+    res = calibrate(views, board, distortion="rational")
+    assert res.ok, res.verdict
+    truth = camera.params[:4]
+    est = np.r_[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]]
+    assert np.all(np.abs(est - truth) < 3 * np.array([res.std[n] for n in ("fx", "fy", "cx", "cy")]) + 0.05), est
+    # every pixel the views reached projects where the lens puts it; ROS's plumb_bob (OpenCV on the
+    # same corners) misses by pixels
+    reached = np.concatenate([v.corners for v in views])
+    rays = cam.rays(reached, camera.params)
+    ours = cam.project(rays, cam.pack_intrinsics(res.K, res.D)).pixels
+    opencv = calibrate(views, board, method="traditional")
+    theirs = cam.project(rays, cam.pack_intrinsics(opencv.K, opencv.D)).pixels
+    ours_err, their_err = (np.linalg.norm(p - reached, axis=1) for p in (ours, theirs))
+    assert np.median(ours_err) < 0.1 and np.median(their_err) > 10 * np.median(ours_err), (ours_err, their_err)
+    assert res.to_dict()["distortion_model"] == "rational_polynomial" and res.D.size == 8
+    assert res.lens_rms is None and default.to_dict()["lens_rms_px"]["chosen"] > 2 * default.lens_rms[1]
+
+
 @pytest.mark.slow
 def test_four_corners_three_images_with_a_real_lens():
     """Where OpenCV refuses (4 corners x 3 images) and a strong lens: the depth fixes the poses,

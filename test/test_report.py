@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
+from tof_calib_ros.core.camera import N_INTRINSICS
 from tof_calib_ros.core.projection_diff import projection_difference, projection_spread
 from tof_calib_ros.files.image_folder import load_views
 from tof_calib_ros.offline.report import ReportError, write_report
@@ -211,7 +212,7 @@ def test_the_coverage_maps_how_well_each_pixel_s_projection_is_known(report):
     corners = np.concatenate([views[v.index].corners for v in result.views])
     xs, ys, spread = projection_spread(np.r_[result.K[[0, 1, 0, 1], [0, 1, 2, 2]], result.D.ravel()],
                                        result.run_intrinsics, CAM.size, corners)
-    assert result.run_intrinsics.shape == (10, 9)
+    assert result.run_intrinsics.shape == (10, N_INTRINSICS)
     cells = np.zeros((8, 8), bool)
     cells[((corners[:, 0] + 0.5) // 25).astype(int), ((corners[:, 1] + 0.5) // 25).astype(int)] = True
     gx, gy = np.meshgrid(xs, ys)

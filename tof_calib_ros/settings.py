@@ -101,7 +101,8 @@ SETTINGS: dict[str, Setting] = {s.name: s for s in (
             "period (8-130 MHz) where they show a wiggle",
             flag="--modulation-mhz", low=0.0, high=10000.0),
     Setting("calibration.distortion", "auto", "distortion terms: auto (those the data call for) or none, "
-            "k1, k1k2, plumb_bob, full", flag="--distortion", choices=("auto", *DISTORTION_TERMS)),
+            "k1, k1k2, plumb_bob, full, rational (rational_polynomial, for wide lenses)", flag="--distortion",
+            choices=("auto", *DISTORTION_TERMS)),
     Setting("calibration.loss", "none", "robust loss against misdetected corners: none, huber or cauchy",
             flag="--loss", choices=LOSSES),
     Setting("calibration.plane_squares", "auto", "the squares the depth planes are fitted to: auto (all unless "

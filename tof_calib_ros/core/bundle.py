@@ -17,7 +17,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from . import depth_bias
-from .camera import N_INTRINSICS, depth_of, project, transform_views
+from .camera import N_INTRINSICS, depth_of, pack_intrinsics, project, split_intrinsics, transform_views
 from .result import INTRINSIC_NAMES, Focal
 
 N_GLOBAL = N_INTRINSICS + depth_bias.N_BIAS
@@ -99,6 +99,10 @@ class State:
     intrinsics: np.ndarray
     bias: np.ndarray = field(default_factory=lambda: np.zeros(depth_bias.N_BIAS))
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+
+    def __post_init__(self) -> None:
+        if len(self.intrinsics) != N_INTRINSICS:   # a plumb_bob packing of 9
+            self.intrinsics = pack_intrinsics(*split_intrinsics(self.intrinsics))
 
     def copy(self) -> State:
         return State(self.intrinsics.copy(), self.bias.copy(), self.poses.copy())
@@ -212,7 +216,7 @@ class Problem:
         n = len(X)
         jp = np.zeros((n, 2, N_GLOBAL + 6))
         jp[:, :, :4] = pr.d_k
-        jp[:, :, 4:9] = pr.d_dist
+        jp[:, :, 4:N_INTRINSICS] = pr.d_dist
         jp[:, :, N_GLOBAL:] = np.einsum("nij,njk->nik", pr.d_point, dX)
         _, scale, tx, ty, ws, wc, radial = state.bias
         jd = np.zeros((n, N_GLOBAL + 6))

@@ -1,8 +1,11 @@
-"""The plumb_bob camera model (OpenCV / ROS CameraInfo) with analytic Jacobians.
+"""The camera models of ROS CameraInfo and OpenCV, plumb_bob and rational_polynomial, with
+analytic Jacobians.
 
-Intrinsics are packed as ``[fx, fy, cx, cy, k1, k2, p1, p2, k3]``. Depth is either ``z``
-(distance along the optical axis, REP 118) or ``radial`` (distance from the optical centre,
-what PMD-class sensors measure).
+Intrinsics are packed as ``[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6]``: the radial factor
+is (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6), plumb_bob where k4..k6 are 0
+(a packing of 9 reads as plumb_bob). Wide ToF lenses (the Azure Kinect's) need the denominator:
+no plumb_bob holds them to a pixel. Depth is either ``z`` (distance along the optical axis, REP
+118) or ``radial`` (distance from the optical centre, what PMD-class sensors measure).
 """
 from __future__ import annotations
 
@@ -14,7 +17,9 @@ import numpy as np
 from .errors import CalibrationError
 
 DEPTH_CONVENTIONS = ("z", "radial")
-N_INTRINSICS = 9
+N_DISTORTION = 8
+N_INTRINSICS = 4 + N_DISTORTION
+PLUMB_BOB = 5   # plumb_bob's coefficients, the first of rational_polynomial's
 
 
 def check_convention(convention: str) -> str:
@@ -25,7 +30,7 @@ def check_convention(convention: str) -> str:
 
 @dataclass
 class Projection:
-    """Pixels and, when asked for, their derivatives by point (N,2,3), fx..cy (N,2,4), D (N,2,5)."""
+    """Pixels and, when asked for, their derivatives by point (N,2,3), fx..cy (N,2,4), D (N,2,8)."""
 
     pixels: np.ndarray
     d_point: np.ndarray | None = None
@@ -33,37 +38,62 @@ class Projection:
     d_dist: np.ndarray | None = None
 
 
+def _lens(params: np.ndarray) -> np.ndarray:
+    """The 8 distortion coefficients of packed intrinsics, of 9 (plumb_bob) or 12."""
+    D = np.zeros(N_DISTORTION)
+    given = np.asarray(params[4:4 + N_DISTORTION], dtype=float)
+    D[:given.size] = given
+    return D
+
+
+def distortion_model(D: np.ndarray) -> str:
+    """ROS CameraInfo's name for a distortion vector."""
+    return "plumb_bob" if np.asarray(D).size <= PLUMB_BOB else "rational_polynomial"
+
+
 def split_intrinsics(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """K (3x3) and D (5,) from the packed intrinsics."""
+    """K (3x3) and D: plumb_bob's 5 coefficients, or rational_polynomial's 8 where k4..k6 are not 0."""
     fx, fy, cx, cy = params[:4]
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    return K, np.asarray(params[4:9], dtype=float).copy()
+    D = _lens(params)
+    return K, D if np.any(D[PLUMB_BOB:]) else D[:PLUMB_BOB]
 
 
 def pack_intrinsics(K: np.ndarray, D: np.ndarray) -> np.ndarray:
-    D5 = np.zeros(5)
     D = np.asarray(D, dtype=float).ravel()
-    D5[: min(5, D.size)] = D[:5]
-    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *D5])
+    return np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], _lens(np.r_[np.zeros(4), D])]
 
 
 def _distort(x: np.ndarray, y: np.ndarray, D: np.ndarray, jac: bool):
-    k1, k2, p1, p2, k3 = D
+    k1, k2, p1, p2, k3, k4, k5, k6 = D
     r2 = x * x + y * y
-    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    rational = bool(k4 or k5 or k6)   # plumb_bob, the common lens, spares the division
+    den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6)) if rational else 1.0
+    radial = num / den if rational else num
     xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
     yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
     if not jac:
         return xd, yd, None, None
-    dr = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d(radial)/d(r2)
+    dr = k1 + r2 * (2 * k2 + 3 * k3 * r2)   # d(radial)/d(r2)
+    if rational:
+        dr = (dr - radial * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / den
     dxy = np.empty(x.shape + (2, 2))
     dxy[..., 0, 0] = radial + 2 * x * x * dr + 2 * p1 * y + 6 * p2 * x
     dxy[..., 0, 1] = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
     dxy[..., 1, 0] = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
     dxy[..., 1, 1] = radial + 2 * y * y * dr + 6 * p1 * y + 2 * p2 * x
-    dD = np.empty(x.shape + (2, 5))
-    dD[..., 0, :] = np.stack([x * r2, x * r2 * r2, 2 * x * y, r2 + 2 * x * x, x * r2 ** 3], -1)
-    dD[..., 1, :] = np.stack([y * r2, y * r2 * r2, r2 + 2 * y * y, 2 * x * y, y * r2 ** 3], -1)
+    # d(radial)/d(k1, k2, k3) are r2, r4, r6 over den; d(radial)/d(k4, k5, k6) those times -radial
+    r4 = r2 * r2
+    up = (r2 / den, r4 / den, r4 * r2 / den)
+    dD = np.empty(x.shape + (2, N_DISTORTION))
+    for i, c in enumerate((x, y)):
+        for col, u in zip((0, 1, 4), up):
+            dD[..., i, col] = c * u
+        for col, u in zip((5, 6, 7), up):
+            dD[..., i, col] = -c * radial * u
+    dD[..., 0, 2], dD[..., 0, 3] = 2 * x * y, r2 + 2 * x * x
+    dD[..., 1, 2], dD[..., 1, 3] = r2 + 2 * y * y, 2 * x * y
     return xd, yd, dxy, dD
 
 
@@ -74,7 +104,7 @@ def project(points: np.ndarray, params: np.ndarray, jac: bool = False) -> Projec
     iz = 1.0 / X[:, 2]
     x = X[:, 0] * iz
     y = X[:, 1] * iz
-    xd, yd, dxy, dD = _distort(x, y, np.asarray(params[4:9], dtype=float), jac)
+    xd, yd, dxy, dD = _distort(x, y, _lens(params), jac)
     pix = np.stack([fx * xd + cx, fy * yd + cy], axis=1)
     if not jac:
         return Projection(pix)
@@ -98,7 +128,7 @@ def undistort_normalized(pixels: np.ndarray, params: np.ndarray, tol_px: float =
     """Normalised image coordinates (N,2) of distorted pixels, by Newton's method to ``tol_px``."""
     pix = np.asarray(pixels, dtype=float).reshape(-1, 2)
     fx, fy, cx, cy = params[:4]
-    D = np.asarray(params[4:9], dtype=float)
+    D = _lens(params)
     target = np.stack([(pix[:, 0] - cx) / fx, (pix[:, 1] - cy) / fy], axis=1)
     xy = target.copy()
     if not np.any(D):
@@ -129,16 +159,14 @@ def fold_distance(params: np.ndarray, image_size: tuple[int, int], directions: i
     fitted to views that leave the image's corners out, high-order terms (k3) can bend back
     before them, and a pixel there then has no ray or two (on 7 real Kinect v2 views, a k3 of
     -2 that fit them to 0.08 px put the views left out 25 px off). Searched along rays from the
-    axis, out to ``reach`` (normalised units) or until the model leaves the image; those to the
-    image's corners too, where a barrel lens is the flattest, and folds first."""
+    axis, out to ``reach`` (normalised units) or until the model leaves the image: a fold in the
+    image's very corners, between two of the rays, can be missed."""
     fx, fy, cx, cy = params[:4]
-    w, h = image_size
-    corners = np.arctan2((np.array([-0.5, -0.5, h - 0.5, h - 0.5]) - cy) / fy,
-                         (np.array([-0.5, w - 0.5, -0.5, w - 0.5]) - cx) / fx)
-    angle = np.r_[np.linspace(0.0, 2 * np.pi, directions, endpoint=False), corners][:, None]
+    angle = np.linspace(0.0, 2 * np.pi, directions, endpoint=False)[:, None]
     r = np.linspace(0.0, reach, steps + 1)[None, 1:]
-    xd, yd, dxy, _ = _distort(r * np.cos(angle), r * np.sin(angle), np.asarray(params[4:9], dtype=float), True)
+    xd, yd, dxy, _ = _distort(r * np.cos(angle), r * np.sin(angle), _lens(params), True)
     u, v = fx * xd + cx, fy * yd + cy
+    w, h = image_size
     inside = (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
     before_leaving = np.cumsum(~inside, axis=1) == 0
     folded = (dxy[..., 0, 0] * dxy[..., 1, 1] - dxy[..., 0, 1] * dxy[..., 1, 0] <= 0) & before_leaving
@@ -153,7 +181,7 @@ def unfolded(xy: np.ndarray, params: np.ndarray, steps: int = 64) -> np.ndarray:
     """Whether the lens model is one-to-one from the axis out to each normalised point (N,2): past
     a fold, a ray projects onto pixels whose own rays are others, and the model says nothing true."""
     t = np.linspace(0.0, 1.0, steps + 1)[1:, None]
-    _, _, dxy, _ = _distort(t * xy[:, 0], t * xy[:, 1], np.asarray(params[4:9], dtype=float), True)
+    _, _, dxy, _ = _distort(t * xy[:, 0], t * xy[:, 1], _lens(params), True)
     return np.all(dxy[..., 0, 0] * dxy[..., 1, 1] - dxy[..., 0, 1] * dxy[..., 1, 0] > 0, axis=0)
 
 

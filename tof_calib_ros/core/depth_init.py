@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .camera import points_from_depth, rays, split_intrinsics
+from .camera import pack_intrinsics, points_from_depth, rays, split_intrinsics
 from .errors import CalibrationError
 
 # A consistent set converges in about ten evaluations; without a cap, inconsistent data (corners
@@ -44,7 +44,7 @@ def focal_guess(pixels: list[np.ndarray], depth: list[np.ndarray], object_points
         raise CalibrationError("no valid depth at any corner of any view (0 or NaN everywhere)")
     f = float(np.median(ratios))
     w, h = image_size
-    return np.array([f, f, (w - 1) / 2, (h - 1) / 2, 0, 0, 0, 0, 0], dtype=float)
+    return pack_intrinsics(np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]), np.zeros(0))
 
 
 def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, depth: np.ndarray,

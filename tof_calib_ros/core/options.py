@@ -14,9 +14,10 @@ from . import depth_bias as bias_model
 from .camera import DEPTH_CONVENTIONS
 from .errors import CalibrationError
 
-# The distortion presets, each the one before plus terms (indices into the intrinsics).
+# The distortion presets, each the one before plus terms (indices into the intrinsics): the
+# last, rational (ROS's rational_polynomial), for wide lenses no polynomial holds.
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
-                    "full": [4, 5, 6, 7, 8]}
+                    "full": [4, 5, 6, 7, 8], "rational": [4, 5, 6, 7, 8, 9, 10, 11]}
 PLANE_SQUARES = ("auto", "white", "all")
 CONVENTIONS = ("auto", *DEPTH_CONVENTIONS)
 METHODS = ("depth", "traditional")

@@ -7,13 +7,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.stats import f as f_distribution
 
+from .camera import distortion_model
 from .depth_bias import NAMES
 from .options import DISTORTION_TERMS, CalibrationOptions, Model
 
 if TYPE_CHECKING:   # coverage reaches bundle, which imports this module
     from .coverage import Extrapolated
 
-INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 # Thresholds of the quality verdict; each failed one is given as a reason.
 # (A depth scale this far from 1 is a wrong square size or depth unit as well, see below.)
@@ -29,6 +30,10 @@ MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
 # which agrees with the full-resolution one; a square 10 % off moves the depth-aided one 5.6 %.
 MAX_CORNER_DEPTH_DISAGREEMENT = 0.05
 REFUSE_SIGMAS = 5.0   # a focal length or depth scale off by more than this many standard deviations is no noise
+# A lens the chosen model does not hold: the corners alone fit a rational lens this many times closer
+# (the Azure Kinect's wide mode: 3.5-4 times under plumb_bob; the real Kinect v2's lens: 1.05). No
+# polynomial holds a 120 degree lens: trusted in plumb_bob, such views put fx 2 % off.
+LENS_MISFIT = 2.0
 # The corners must fit about as well with the depth as alone. The depth costs them a little on real
 # data (real Kinect v2 subsets of 3-10 views: up to 1.55 times the corners-alone pixel noise, 0.018 px
 # above it); a lens model too small for the lens or a wrong depth convention costs more (0.03-0.05 px
@@ -117,11 +122,13 @@ class CalibrationResult:
     # fx, fy and what their noise gives them with the depth at its full weight: the focal length the
     # depth says, where it pulled the corners off their fit and the result leans on the corners
     depth_focal: Focal | None = None
-    # (R, 9) the intrinsics refitted without each of R runs of consecutive views, the jackknife
+    # (R, 12) the intrinsics refitted without each of R runs of consecutive views, the jackknife
     # behind the stated sigmas: how well each pixel's projection is known (core.projection_diff)
     run_intrinsics: np.ndarray | None = None
     # where the views left part of the image unreached and the projection there is much less known
     extrapolated: Extrapolated | None = None
+    # the corners alone: their pixel RMS in the lens chosen and in a rational lens (px), where checked
+    lens_rms: tuple[float, float] | None = None
 
     @property
     def depth_convention(self) -> str:
@@ -154,7 +161,13 @@ class CalibrationResult:
         values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
-        if self.corner_focal is not None and self.depth_focal is not None:
+        misfit = self.lens_rms is not None and self.lens_rms[0] >= LENS_MISFIT * self.lens_rms[1]
+        if misfit:
+            chosen, rational = self.lens_rms
+            reasons.append(f"the lens bends more than {self.model.distortion} can follow: the corners fit a rational "
+                           f"lens {chosen / rational:.1f} times closer ({rational:.3f} against {chosen:.3f} px RMS), "
+                           "as a wide lens's do: calibrate with the distortion 'rational' (ROS's rational_polynomial)")
+        if self.corner_focal is not None and self.depth_focal is not None and not misfit:
             for name, f, c, s, apart in focal_disagreements(self.depth_focal, self.corner_focal):
                 reasons.append(f"the corners alone give {name}={c:.1f}±{s:.1f} px, the depth {f:.1f} px "
                                f"({f / c - 1:+.1%}, {abs(f - c) / apart:.0f} standard deviations): "
@@ -217,7 +230,7 @@ class CalibrationResult:
             "options": self.options.to_dict(),
             "model": self.model.to_dict(),
             "camera_matrix": self.K.tolist(),
-            "distortion_model": "plumb_bob",
+            "distortion_model": distortion_model(self.D),
             "distortion_coefficients": self.D.tolist(),
             "depth_bias": dict(zip(NAMES, map(float, self.depth_bias))),
             "std": dict(self.std),
@@ -236,6 +249,7 @@ class CalibrationResult:
             "extrapolated": None if self.extrapolated is None else self.extrapolated._asdict(),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
+            "lens_rms_px": None if self.lens_rms is None else dict(zip(("chosen", "rational"), self.lens_rms)),
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
             "views": [{
                 "index": v.index, "rvec": v.rvec.tolist(), "tvec": v.tvec.tolist(),

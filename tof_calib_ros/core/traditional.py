@@ -14,7 +14,7 @@ from .errors import CalibrationError
 _NO_TANGENTIAL = cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3
 OPENCV_FLAGS = {"none": _NO_TANGENTIAL | cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2,
                 "k1": _NO_TANGENTIAL | cv2.CALIB_FIX_K2, "k1k2": _NO_TANGENTIAL,
-                "plumb_bob": cv2.CALIB_FIX_K3, "full": 0}
+                "plumb_bob": cv2.CALIB_FIX_K3, "full": 0, "rational": cv2.CALIB_RATIONAL_MODEL}
 
 
 @dataclass

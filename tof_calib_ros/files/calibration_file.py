@@ -20,10 +20,11 @@ import cv2
 import numpy as np
 import yaml
 
+from ..core.camera import distortion_model
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 
-DISTORTION_MODEL = "plumb_bob"
+DISTORTION_MODEL = "plumb_bob"   # what a file without the key means
 # camera_info_manager refuses any other camera name (CameraInfoManager::validateName)
 CAMERA_NAME = re.compile(r"[A-Za-z0-9_]+")
 _MAX_MM = np.iinfo(np.uint16).max
@@ -98,10 +99,10 @@ def _matrix(rows: int, cols: int, values) -> dict:
 
 def monocular_fields(K: np.ndarray, D: np.ndarray, size: tuple[int, int]) -> dict:
     """The sensor_msgs/CameraInfo fields of a monocular camera, as camera_calibration fills them:
-    plumb_bob, R the identity, P = [K | 0]. The node's message, the simulated driver's, a bag's
-    and the YAML file are all made from these."""
+    plumb_bob (rational_polynomial for 8 terms), R the identity, P = [K | 0]. The node's message,
+    the simulated driver's, a bag's and the YAML file are all made from these."""
     K = np.asarray(K, dtype=float).reshape(3, 3)
-    return {"width": int(size[0]), "height": int(size[1]), "distortion_model": DISTORTION_MODEL,
+    return {"width": int(size[0]), "height": int(size[1]), "distortion_model": distortion_model(D),
             "d": [float(x) for x in np.ravel(D)], "k": [float(x) for x in K.ravel()],
             "r": [float(x) for x in np.eye(3).ravel()],
             "p": [float(x) for x in np.hstack([K, np.zeros((3, 1))]).ravel()]}
@@ -121,8 +122,9 @@ def _intrinsics(source: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
         raise CalibrationFileError(f"K, D must be numbers and image_size (width, height): {exc}") from None
     if K.shape != (3, 3):
         raise CalibrationFileError(f"K must be 3x3, got shape {K.shape}")
-    if D.shape != (5,):
-        raise CalibrationFileError(f"D must hold the 5 plumb_bob terms (k1, k2, p1, p2, k3), got {D.size}")
+    if D.size not in (5, 8):
+        raise CalibrationFileError("D must hold the 5 plumb_bob terms (k1, k2, p1, p2, k3) or the 8 of "
+                                   f"rational_polynomial (k4, k5, k6 after them), got {D.size}")
     if not (np.all(np.isfinite(K)) and np.all(np.isfinite(D))):
         raise CalibrationFileError("K or D has NaN or inf values; refusing to write them as a calibration")
     if w <= 0 or h <= 0:

@@ -54,14 +54,17 @@ class Calibration:
 
 
 def _refuse_unreadable_model(cam: CameraYaml, where: str) -> None:
-    """The check projects with plumb_bob and a K without skew; a file it would read otherwise
-    (another model, a K that is not a camera matrix) is refused, not half-read into a verdict."""
+    """The check projects with plumb_bob or rational_polynomial and a K without skew; a file it
+    would read otherwise (another model, a K that is not a camera matrix) is refused, not
+    half-read into a verdict."""
     K = cam.K
     problems = []
-    if cam.distortion_model not in ("plumb_bob", ""):
-        problems.append(f"distortion model {cam.distortion_model!r} (the check reads plumb_bob only)")
-    if cam.D.size > 5:
-        problems.append(f"{cam.D.size} distortion terms (plumb_bob has 5)")
+    terms = {"plumb_bob": 5, "": 5, "rational_polynomial": 8}.get(cam.distortion_model)
+    if terms is None:
+        problems.append(f"distortion model {cam.distortion_model!r} (the check reads plumb_bob and "
+                        "rational_polynomial only)")
+    elif cam.D.size > terms:
+        problems.append(f"{cam.D.size} distortion terms ({cam.distortion_model or 'plumb_bob'} has {terms})")
     if not (K[0, 0] > 0 and K[1, 1] > 0):
         problems.append(f"focal lengths fx={K[0, 0]:g}, fy={K[1, 1]:g} (must be positive)")
     if K[0, 1] != 0:
@@ -77,7 +80,7 @@ def load_calibration(yaml_path: str | Path) -> Calibration:
     yaml_path = Path(yaml_path)
     cam = read_camera_yaml(yaml_path)
     _refuse_unreadable_model(cam, str(yaml_path))
-    D = np.zeros(5)
+    D = np.zeros(8)
     D[:cam.D.size] = cam.D
     bias, convention, period, source = np.zeros(bias_model.N_BIAS), None, None, str(yaml_path)
     sidecar = yaml_path.with_suffix(".json")

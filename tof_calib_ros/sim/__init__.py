@@ -2,7 +2,7 @@
 
 Tests and demos need frames whose truth is known exactly: the corner pixels, the corner depths
 and the board pose. ``render`` draws the amplitude (IR) and depth images of a ``Board`` seen by a
-plumb_bob camera by inverse mapping: every pixel (and every sub-sample, for anti-aliasing) is
+plumb_bob or rational_polynomial camera by inverse mapping: every pixel (and every sub-sample, for anti-aliasing) is
 traced back along its viewing ray to the board plane, so the geometry is that of
 ``core.camera`` to rounding error and nothing is re-projected or resampled.
 
@@ -36,8 +36,8 @@ BORDER, BACKGROUND, SUPERSAMPLE, REFLECTIVITY = 1.0, 3.0, 4, (0.9, 0.1, 0.05)
 
 @dataclass(frozen=True)
 class SimCamera:
-    """Intrinsics packed as in ``core.camera`` ([fx, fy, cx, cy, k1, k2, p1, p2, k3]) and the
-    image size in pixels."""
+    """Intrinsics packed as in ``core.camera`` ([fx, fy, cx, cy, k1, k2, p1, p2, k3], and k4, k5,
+    k6 for a rational lens) and the image size in pixels."""
 
     params: np.ndarray
     width: int
@@ -45,18 +45,13 @@ class SimCamera:
 
     def __post_init__(self) -> None:
         p = np.asarray(self.params, dtype=float).ravel()
-        if p.size != cam.N_INTRINSICS or not np.all(np.isfinite(p)):
-            raise CalibrationError(f"camera params must be {cam.N_INTRINSICS} finite numbers")
+        if p.size not in (4 + cam.PLUMB_BOB, cam.N_INTRINSICS) or not np.all(np.isfinite(p)):
+            raise CalibrationError(f"camera params must be {4 + cam.PLUMB_BOB} or {cam.N_INTRINSICS} finite numbers")
         if p[0] <= 0 or p[1] <= 0:
             raise CalibrationError("focal lengths must be positive")
         if int(self.width) < 2 or int(self.height) < 2:
             raise CalibrationError(
                 f"image must be at least 2x2 pixels, got {self.width}x{self.height}")
-        fold = cam.fold_distance(p, (int(self.width), int(self.height)))
-        if fold is not None:
-            raise CalibrationError(
-                f"the lens folds back inside the {self.width}x{self.height} image, {fold:.0f} px from the principal "
-                "point: past it no ray reaches a pixel, as none of a real lens would")
         object.__setattr__(self, "params", p)
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
@@ -201,16 +196,24 @@ def _centre_normalized(params_bytes: bytes, width: int, height: int) -> np.ndarr
     jy = (proj(xy + [0.0, h]) - f0) / h
     det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
     err = f0 - target
-    for _ in range(30):
-        if np.max(np.abs(err)) < 1e-9:
-            break
-        xy = xy - np.stack([(jy[:, 1] * err[:, 0] - jy[:, 0] * err[:, 1]) / det,
-                            (-jx[:, 1] * err[:, 0] + jx[:, 0] * err[:, 1]) / det], 1)
-        err = proj(xy) - target
-    else:
-        # Distortion too strong for the polish (a fold in the model): fall back to the exact,
-        # slow path rather than return rays that are off.
-        xy = cam.undistort_normalized(target, params)
+    # past a fold the polish runs off to infinity: the exact path below then says so
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(30):
+            if np.max(np.abs(err)) < 1e-9:
+                break
+            xy = xy - np.stack([(jy[:, 1] * err[:, 0] - jy[:, 0] * err[:, 1]) / det,
+                                (-jx[:, 1] * err[:, 0] + jx[:, 0] * err[:, 1]) / det], 1)
+            err = proj(xy) - target
+        else:
+            # Distortion too strong for the polish: fall back to the exact, slow path rather than
+            # return rays that are off; where that finds none either, the lens folds inside the image
+            xy = cam.undistort_normalized(target, params)
+            off = np.linalg.norm(proj(xy) - target, axis=1)
+            if not np.all(off < 1e-6):
+                far = np.hypot(*(target[~(off < 1e-6)] - params[2:4]).T).min()
+                raise CalibrationError(f"the lens folds back inside the {width}x{height} image: no ray reaches the "
+                                       f"pixels {far:.0f} px and more from the principal point, as none of a real "
+                                       "lens's would")
     out = xy.reshape(height, width, 2)
     out.setflags(write=False)
     return out

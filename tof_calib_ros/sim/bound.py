@@ -143,7 +143,7 @@ class Bound:
             self._errors.append(_error_rows(scene, R, t))
 
     def information(self, intrinsics: list[int], depth_terms: list[str] | None) -> np.ndarray:
-        """The Fisher information of the free ``intrinsics`` (indices into the packed nine), the
+        """The Fisher information of the free ``intrinsics`` (indices into the packed twelve), the
         depth terms and every view's pose, in that order; ``depth_terms`` None: the corners alone."""
         if depth_terms is not None and not self._depth:
             raise CalibrationError("noiseless depth carries unbounded information")
