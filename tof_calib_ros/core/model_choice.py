@@ -76,7 +76,7 @@ def select_model(observations: list[bundle.Observations], state: bundle.State, c
     if options.distortion == "auto":
         while True:
             # every larger preset, by the terms it adds: k1 alone may not pay where k1 and k2 do; not
-            # the rational lens, which the caller asks for (see ``lens_misfit``)
+            # the rational lens, which the caller asks for (the verdict's LENS_MISFIT says when)
             larger = list(DISTORTION_TERMS)[list(DISTORTION_TERMS).index(model.distortion) + 1:AUTO_PRESETS]
             extra = {name: [t for t in DISTORTION_TERMS[name] if t not in free] for name in larger}
             net = {name: tested(name, terms) for name, terms in extra.items()}

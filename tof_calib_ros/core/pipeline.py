@@ -471,7 +471,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if corner_fit is not None and model.distortion == "rational":
         # a lens ROS's plumb_bob cannot hold bends the corners' own focal length in it (a wide
         # Azure Kinect lens: 6 % off, which the verdict took for a wrong square size): the corners
-        # alone in the lens the data chose, from the joint fit's
+        # alone in the rational lens asked for, from the joint fit's
         corner_fit = _corner_fit(obj, prepared, fit.state, convention, model.distortion, max_iter=100)
     corners = None if corner_fit is None else CornersAlone(corner_fit, obj, prepared, image_size)
     check = depth_check(fit, depths, planes, corners, convention) \
