@@ -31,7 +31,7 @@ MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
 MAX_CORNER_DEPTH_DISAGREEMENT = 0.05
 REFUSE_SIGMAS = 5.0   # a focal length or depth scale off by more than this many standard deviations is no noise
 # A lens the chosen model does not hold: the corners alone fit a rational lens this many times closer
-# (the Azure Kinect's wide mode: 2.6-3.6 times under plumb_bob; the real Kinect v2's lens: 1.05). No
+# (the Azure Kinect's wide mode: 2.6-3.6 times under plumb_bob; the real Kinect v2's lens, all views: 1.005). No
 # polynomial holds a 120 degree lens: trusted in plumb_bob, such views put fx 2 % off.
 LENS_MISFIT = 2.0
 # The corners must fit about as well with the depth as alone. The depth costs them a little on real
