@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tof_calib_ros import Board, View, calibrate, sim
-from tof_calib_ros.core.camera import fold_distance, pack_intrinsics
+from tof_calib_ros.core.camera import N_INTRINSICS, fold_distance, pack_intrinsics
 from tof_calib_ros.core.projection_diff import projection_difference, projection_spread
 
 SIZE = (512, 424)
@@ -90,7 +90,7 @@ def test_the_runs_spread_is_the_scale_of_the_true_error_and_grows_where_no_view_
     for seed in range(4):
         views = _right_half_views(seed)
         result = calibrate(views, BOARD)
-        assert result.run_intrinsics.shape == (10, 9)
+        assert result.run_intrinsics.shape == (10, N_INTRINSICS)
         estimate = pack_intrinsics(result.K, result.D)
         seen = np.concatenate([v.corners for v in views])
         error = projection_difference(STRONG.params, estimate, STRONG.size, seen).diff
