@@ -138,10 +138,12 @@ def _corner_fit(obj: list[np.ndarray], views: list[Prepared], start: Traditional
 def _lens_rms(obj: list[np.ndarray], views: list[Prepared], state: bundle.State, convention: str,
               lens: str) -> tuple[float, float]:
     """The corners alone, their pixel RMS in ``lens`` and in a rational lens: a wide lens no
-    polynomial holds leaves the first several times the second (the verdict's LENS_MISFIT).
-    Each at least the least pixel noise a fit assumes: noiseless corners fit any lens to 0."""
+    polynomial holds leaves the first several times the second (the verdict's LENS_MISFIT). Per
+    corner, as ``CalibrationResult.pixel_rms``; each at least the least pixel noise a fit assumes
+    (a coordinate's, so sqrt(2) times it a corner): noiseless corners fit any lens to 0."""
     def rms(fit: bundle.Fit) -> float:
-        return max(float(np.sqrt(np.mean(np.concatenate(fit.pixel_residuals) ** 2))), bundle.MIN_NOISE[0])
+        return max(float(np.sqrt(np.mean(np.concatenate(fit.pixel_residuals) ** 2) * 2)),
+                   bundle.MIN_NOISE[0] * np.sqrt(2))
     return rms(_corner_fit(obj, views, state, convention, lens, LENS_ITERATIONS)), \
         rms(_corner_fit(obj, views, state, convention, "rational", LENS_ITERATIONS))
 

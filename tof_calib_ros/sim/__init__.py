@@ -2,9 +2,9 @@
 
 Tests and demos need frames whose truth is known exactly: the corner pixels, the corner depths
 and the board pose. ``render`` draws the amplitude (IR) and depth images of a ``Board`` seen by a
-plumb_bob or rational_polynomial camera by inverse mapping: every pixel (and every sub-sample, for anti-aliasing) is
-traced back along its viewing ray to the board plane, so the geometry is that of
-``core.camera`` to rounding error and nothing is re-projected or resampled.
+plumb_bob or rational_polynomial camera by inverse mapping: every pixel (and every sub-sample,
+for anti-aliasing) is traced back along its viewing ray to the board plane, so the geometry is
+that of ``core.camera`` to rounding error and nothing is re-projected or resampled.
 
 Pixel ``(u, v)`` is centred on image coordinate ``(u, v)``, as in OpenCV, so the corners that
 ``cv2.findChessboardCornersSB`` returns are directly comparable with ``Frame.corners``.
