@@ -20,6 +20,7 @@ DEPTH_CONVENTIONS = ("z", "radial")
 N_DISTORTION = 8
 N_INTRINSICS = 4 + N_DISTORTION
 PLUMB_BOB = 5   # plumb_bob's coefficients, the first of rational_polynomial's
+MODEL_TERMS = {"plumb_bob": PLUMB_BOB, "rational_polynomial": N_DISTORTION}   # ROS CameraInfo's names
 
 
 def check_convention(convention: str) -> str:

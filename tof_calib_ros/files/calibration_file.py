@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import yaml
 
-from ..core.camera import distortion_model
+from ..core.camera import MODEL_TERMS, distortion_model
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres
 
@@ -122,7 +122,7 @@ def _intrinsics(source: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
         raise CalibrationFileError(f"K, D must be numbers and image_size (width, height): {exc}") from None
     if K.shape != (3, 3):
         raise CalibrationFileError(f"K must be 3x3, got shape {K.shape}")
-    if D.size not in (5, 8):
+    if D.size not in MODEL_TERMS.values():
         raise CalibrationFileError("D must hold the 5 plumb_bob terms (k1, k2, p1, p2, k3) or the 8 of "
                                    f"rational_polynomial (k4, k5, k6 after them), got {D.size}")
     if not (np.all(np.isfinite(K)) and np.all(np.isfinite(D))):

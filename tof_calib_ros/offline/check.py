@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core import depth_bias as bias_model
 from ..core.board import Board
-from ..core.camera import depth_of, pack_intrinsics, transform
+from ..core.camera import MODEL_TERMS, N_DISTORTION, depth_of, pack_intrinsics, transform
 from ..core.errors import CalibrationError
 from ..core.inputs import View
 from ..core.planarize import planarize
@@ -59,7 +59,7 @@ def _refuse_unreadable_model(cam: CameraYaml, where: str) -> None:
     half-read into a verdict."""
     K = cam.K
     problems = []
-    terms = {"plumb_bob": 5, "": 5, "rational_polynomial": 8}.get(cam.distortion_model)
+    terms = MODEL_TERMS.get(cam.distortion_model or "plumb_bob")
     if terms is None:
         problems.append(f"distortion model {cam.distortion_model!r} (the check reads plumb_bob and "
                         "rational_polynomial only)")
@@ -80,7 +80,7 @@ def load_calibration(yaml_path: str | Path) -> Calibration:
     yaml_path = Path(yaml_path)
     cam = read_camera_yaml(yaml_path)
     _refuse_unreadable_model(cam, str(yaml_path))
-    D = np.zeros(8)
+    D = np.zeros(N_DISTORTION)
     D[:cam.D.size] = cam.D
     bias, convention, period, source = np.zeros(bias_model.N_BIAS), None, None, str(yaml_path)
     sidecar = yaml_path.with_suffix(".json")
