@@ -246,7 +246,7 @@ def test_no_depth_on_the_board_is_rejected():
 
 
 def test_max_views_and_reset(sweep_frames):
-    col = ViewCollector(BOARD, CollectorConfig(max_views=3))
+    col = ViewCollector(BOARD, CollectorConfig(max_views=3, min_views=3))
     history = []
     for i, f in enumerate(sweep_frames):
         col.add(f.amplitude, f.depth, 0.1 * i)
@@ -288,7 +288,7 @@ def test_a_full_set_swaps_its_most_redundant_view_for_a_new_one():
     poses = [((100, 100), 0.7, 0), ((102, 100), 0.7, 0), ((100, 102), 0.7, 0), ((60, 60), 0.9, 30),
              ((130, 80), 0.8, 25)]
     frames = [_frame(_pose(*p), seed=i) for i, p in enumerate(poses)]
-    col = ViewCollector(BOARD, CollectorConfig(max_views=4))
+    col = ViewCollector(BOARD, CollectorConfig(max_views=4, min_views=4))
     out = _feed(col, frames, dt=1.0)
     assert all(o.accepted for o in out), [o.reason for o in out]
     assert out[-1].reason.startswith("accepted in place of a more redundant view")
@@ -309,7 +309,7 @@ def test_accurate_corners_are_found_for_the_views_kept_only_and_a_view_they_lose
         return looked_at[-1]
 
     monkeypatch.setattr(collector, "accurate_detect", counted)
-    col = ViewCollector(BOARD, CollectorConfig(max_views=4))
+    col = ViewCollector(BOARD, CollectorConfig(max_views=4, min_views=4))
     out = _feed(col, frames, dt=1.0)
     assert all(o.accepted for o in out) and "in place of" in out[-1].reason and looked_at == []
     assert len(col) == 4 and len(col.unsharpened()) == 4

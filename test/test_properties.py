@@ -367,6 +367,7 @@ def test_collector_config_is_valid_or_refused(values, depth_range, spans_):
     assert all(getattr(config, k) == v for k, v in values.items() if k != "spans"), (values, config)
     counts_ = [config.max_views, config.min_views]
     assert all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in counts_)
+    assert 1 <= config.min_views <= config.max_views, config   # else the views could never be enough
     numbers = [config.min_distance, config.exposure_s, config.max_blur_px, config.max_gap_s, config.border_px,
                config.min_depth_fraction, config.max_tilt_deg, *config.depth_range, *config.spans]
     # inf may mean "no limit"; NaN and anything not a number mean nothing

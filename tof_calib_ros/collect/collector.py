@@ -139,6 +139,8 @@ class CollectorConfig:
             (self.min_distance >= 0, f"min_distance must be >= 0, got {self.min_distance}"),
             (self.max_views >= 1, f"max_views must be >= 1, got {self.max_views}"),
             (self.min_views >= 1, f"min_views must be >= 1, got {self.min_views}"),
+            (self.min_views <= self.max_views, f"min_views ({self.min_views}) must not exceed max_views "
+             f"({self.max_views}): the views could never be enough"),
             (self.exposure_s > 0, f"exposure_s must be positive, got {self.exposure_s}"),
             (self.max_blur_px > 0, f"max_blur_px must be positive, got {self.max_blur_px}"),
             (self.max_gap_s > 0, f"max_gap_s must be positive, got {self.max_gap_s}"),
