@@ -25,9 +25,10 @@ def noise(depth_offset: float) -> Noise:
 
 
 def poses(camera: SimCamera, board: Board, n: int, rng: np.random.Generator) -> list[Pose]:
-    """Board poses at distances where the board fills a like part of any camera's image."""
-    f = camera.width / 200 * 0.4
-    return random_poses(camera, board, n, rng, distance=(f, 2.2 * f), max_tilt_deg=40)
+    """Board poses 0.4 to 0.88 m away for a 200 px wide image, farther in proportion to the width
+    (1.28 to 2.8 m at 640 px): the wider ToF sensors are used farther out."""
+    near = camera.width / 200 * 0.4
+    return random_poses(camera, board, n, rng, distance=(near, 2.2 * near), max_tilt_deg=40)
 
 
 def frame(camera: SimCamera, board: Board, pose: Pose, sensor: Noise, rng: np.random.Generator,
