@@ -405,6 +405,62 @@ def test_the_wiggle_and_its_period_are_chosen_by_the_data(amplitude, n_img, n_co
             assert res.model.wiggle_period is None and evidence["gain"] < evidence["price"], (seed, evidence)
 
 
+# A pico flexx class sensor, unlike the ones the defaults were tuned on: 224x171, its own lens,
+# 80 MHz (a wiggle period of 0.47 m, a quarter of the 20 MHz one), a 10 mm offset, black squares
+# reading farther, the board 0.25-0.6 m away and its corners detected in the amplitude images.
+PICO = np.array([212.0, 212.0, 111.3, 86.6, -0.25, 0.08, 0.0, 0.0, 0.0])
+
+
+def _pico(seed: int) -> tuple[Board, list[View], float]:
+    board = Board(5, 7, 0.03)
+    camera = sim.SimCamera(PICO, 224, 171)
+    period = depth_bias.wiggle_period(80e6)
+    rng = np.random.default_rng(seed)
+    noise = sim.Noise(depth=0.004, offset=0.01, wiggle_amplitude=0.015, wiggle_period=period,
+                      wiggle_phase=rng.uniform(0, 2 * np.pi), amplitude=0.01, dark_offset=0.004)
+    poses = sim.random_poses(camera, board, 8, rng, distance=(0.25, 0.6), max_tilt_deg=45)
+    frames = [sim.render(camera, board, *pose, noise=noise, rng=rng, invalid=0.0) for pose in poses]
+    return board, [View(f.depth, amplitude=f.amplitude) for f in frames], period
+
+
+@pytest.mark.slow
+def test_a_short_wiggle_of_a_low_resolution_sensor_is_found_from_its_amplitude_images():
+    """The wiggle is found at a period within a candidate step (0.46 or 0.58 m in all of seeds
+    1-16) and fx is within 1 % (0.99 % at worst over seeds 1-16); at most one of three seeds lies
+    beyond 2 stated sigmas (a normal error does so 5 % of the time), none beyond 3."""
+    z = []
+    for seed in range(1, 4):
+        board, views, period = _pico(seed)
+        res = calibrate(views, board)
+        assert "wiggle" in res.model.depth_bias.split("+"), (seed, res.model.reasons)
+        assert period / 1.3 < res.model.wiggle_period < period * 1.3, (seed, res.model.wiggle_period)
+        error = res.K[0, 0] - PICO[0]
+        assert res.ok and abs(error) < 0.01 * PICO[0], (seed, res.K[0, 0], res.verdict)
+        z.append(error / res.std["fx"])
+    assert np.sum(np.abs(z) > 2) <= 1 and np.max(np.abs(z)) < 3, np.round(z, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured 2026-11-30: 13 of 16 seeds within 2 stated sigmas, one trusted "
+                                       "5.7 sigmas (1 %) off; the paper_table rows' 94-98 % do not carry over")
+def test_a_short_wiggle_of_a_low_resolution_sensor_states_honest_sigmas():
+    """The issue's sigma honesty (the true fx within 2 stated sigmas in 90 % of trials) on the
+    pico flexx class sensor, whose corners are detected (0.17 px RMS off their true places) and whose wiggle is short:
+    not met. The errors lean one way (fx low in 12 of 16) and the depth's model claims up to 3
+    times OpenCV's precision there. Weighing the wiggle's periods by their refits' deviances in
+    fx's uncertainty (not the score test's gains) mended a 5-sigma case with the corners' true
+    positions, but on paper_table's near-frontal wiggling rows put 91 % within 2 sigmas (95 %
+    before) and trusted 31 % (48 %): not kept."""
+    inside, trusted_far = 0, 0
+    for seed in range(1, 17):
+        board, views, _ = _pico(seed)
+        res = calibrate(views, board)
+        z = abs(res.K[0, 0] - PICO[0]) / res.std["fx"]
+        inside += z <= 2
+        trusted_far += bool(res.ok and z > 3)
+    assert inside >= 15 and trusted_far == 0, (inside, trusted_far)
+
+
 def test_a_near_frontal_wiggle_is_exact_on_noiseless_views():
     """Near frontal the corners cannot pin fx, and the depth's planes carry it. Planes fitted to
     depth corrected by the wiggle's own estimate shaped the observations they were fitted to, and
