@@ -442,11 +442,11 @@ def test_a_short_wiggle_of_a_low_resolution_sensor_is_found_from_its_amplitude_i
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="measured 2026-11-30: 13 of 16 seeds within 2 stated sigmas, one trusted "
-                                       "5.7 sigmas (1 %) off; the paper_table rows' 94-98 % do not carry over")
+                                       "5.7 sigmas (1 %) off; the paper_table rows' 94-99 % do not carry over")
 def test_a_short_wiggle_of_a_low_resolution_sensor_states_honest_sigmas():
     """The issue's sigma honesty (the true fx within 2 stated sigmas in 90 % of trials) on the
-    pico flexx class sensor, whose corners are detected (0.17 px RMS off their true places) and whose wiggle is short:
-    not met. The errors lean one way (fx low in 12 of 16) and the depth's model claims up to 3
+    pico flexx class sensor, whose corners are detected (0.17 px RMS off their true places) and
+    whose wiggle is short: not met. The errors lean one way (fx low in 12 of 16) and the depth's model claims up to 3
     times OpenCV's precision there. Weighing the wiggle's periods by their refits' deviances in
     fx's uncertainty (not the score test's gains) mended a 5-sigma case with the corners' true
     positions, but on paper_table's near-frontal wiggling rows put 91 % within 2 sigmas (95 %
