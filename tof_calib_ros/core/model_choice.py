@@ -199,6 +199,9 @@ def _rational_where_k3_folds(prepared, plane_samples, obj, given, start: bundle.
         return None
     held = _held_out_deviance(observations, fit, free, options)
     held_without = _held_out_deviance(observations, without.fit, without.free, options)
+    if held is None or held_without is None:
+        say("the rational lens not taken where k3 folds: too few views to leave some out")
+        return None
     if held_without - held <= price:
         say(f"the rational lens not taken where k3 folds: it predicts views left out by {held_without - held:.1f} "
             f"of their deviance better than the lens without k3, not more than its price, {price:.1f}")
@@ -222,17 +225,19 @@ def _rational_where_k3_folds(prepared, plane_samples, obj, given, start: bundle.
 
 
 def _held_out_deviance(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
-                       options: CalibrationOptions) -> float:
-    """The views' deviance, each fold of them predicted by the model refitted without it (only
-    their poses fitted to them)."""
-    convention, total = options.depth_convention, 0.0
-    for keep in bundle.jackknife_folds(len(observations), HELD_OUT_FOLDS):
-        out = np.setdiff1d(np.arange(len(observations)), keep)
-        state = bundle.State(fit.state.intrinsics.copy(), fit.state.bias.copy(), fit.state.poses[keep].copy())
-        sub = bundle.solve([observations[i] for i in keep], state, convention, free, loss=options.loss,
-                           wiggle_period=fit.wiggle_period)
-        state = bundle.State(sub.state.intrinsics, sub.state.bias, fit.state.poses[out].copy())
+                       options: CalibrationOptions) -> float | None:
+    """The views' deviance, each fold of them predicted by the model refitted without it
+    (``bundle.fold_estimates``; only their poses fitted to them); None where they are too few to
+    fold (fewer than 3)."""
+    convention, n = options.depth_convention, len(observations)
+    refits = bundle.fold_estimates(observations, fit, convention, HELD_OUT_FOLDS, free, options.loss)
+    if refits is None:
+        return None
+    total = 0.0
+    for keep, globals_ in zip(bundle.jackknife_folds(n, HELD_OUT_FOLDS), refits):
+        out = np.setdiff1d(np.arange(n), keep)
         left = [observations[i] for i in out]
+        state = bundle.State(globals_[:N_INTRINSICS], globals_[N_INTRINSICS:], fit.state.poses[out].copy())
         total += bundle.deviance(left, bundle.solve(left, state, convention, [], loss=options.loss,
                                                     wiggle_period=fit.wiggle_period))
     return total
