@@ -3,8 +3,10 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, CalibrationError, sim
+from tof_calib_ros.core import camera as cam
 from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.planarize import (
+    SQUARE_MARGIN,
     board_samples,
     corner_depth,
     corner_depth_along,
@@ -19,6 +21,7 @@ from tof_calib_ros.core.planarize import (
     sample_depth,
     smoothed,
     square_pixels,
+    squares_moved,
 )
 
 BOARD = Board(8, 6, 0.04)
@@ -72,6 +75,28 @@ def test_square_colours_and_the_outline_of_the_squared_area():
     assert black[np.argmin(np.hypot(x + 0.025, y + 0.025))] and white[np.argmin(np.hypot(x - 0.025, y + 0.025))]
     inner = board.in_squared_area(x, y, margin=0.2)
     np.testing.assert_array_equal(inner, (x >= -0.04) & (x <= 0.14) & (y >= -0.04) & (y <= 0.14))
+
+
+def test_how_far_another_lens_moves_the_squares_the_samples_see():
+    """The samples are chosen through one lens; a lens that fits the corners as well moves no
+    square (K's scale and centre are absorbed by the board's homography), a barrel the first lens
+    lacks moves the squares near the image's edge beyond the samples' margin, and little at the centre."""
+    pinhole = np.array([200.0, 200.0, 100.0, 100.0] + [0.0] * 8)
+    barrel = np.r_[pinhole[:4], -0.4, 0.15, np.zeros(6)]
+    board = Board(6, 5, 0.03)
+    ids = np.arange(board.n_corners)
+
+    def corners(lens, centre):   # a fronto-parallel board at 0.6 m, its middle at ``centre`` (normalised)
+        obj = board.object_points(ids) - [0.075, 0.06, 0.0]
+        return cam.project(obj + [centre[0] * 0.6, centre[1] * 0.6, 0.6], lens).pixels
+
+    middle, edge = corners(barrel, (0.0, 0.0)), corners(barrel, (0.35, 0.35))
+    assert squares_moved(edge, ids, board, barrel, barrel, (200, 200)) < 1e-6
+    shifted = np.r_[210.0, 205.0, 103.0, 98.0, np.zeros(8)]
+    assert squares_moved(corners(pinhole, (0.3, 0.3)), ids, board, pinhole, shifted, (200, 200)) < 1e-6
+    at_middle = squares_moved(middle, ids, board, pinhole, barrel, (200, 200))
+    at_edge = squares_moved(edge, ids, board, pinhole, barrel, (200, 200))
+    assert at_middle < SQUARE_MARGIN < at_edge, (at_middle, at_edge)
 
 
 def test_white_squares_follow_the_amplitude_when_the_labelling_is_turned():

@@ -14,7 +14,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -30,9 +30,18 @@ from .depth_trust import CORNER_FOLDS, CornersAlone, DepthCheck, bowl_check, dep
 from .detection import detect
 from .errors import CalibrationError
 from .inputs import Prepared, View, check_arguments, prepare, require
-from .model_choice import choose_and_fit
+from .model_choice import Fitted, choose_and_fit
 from .options import DISTORTION_TERMS, CalibrationOptions, Model
-from .planarize import DepthSamples, Plane, board_samples, directions, fit_samples, sample_depth
+from .planarize import (
+    SQUARE_MARGIN,
+    DepthSamples,
+    Plane,
+    board_samples,
+    directions,
+    fit_samples,
+    sample_depth,
+    squares_moved,
+)
 from .result import (
     MAX_CORNER_DEPTH_DISAGREEMENT,
     CalibrationResult,
@@ -318,6 +327,56 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
     return PlaneSamples(samples, width), squares, convention, reasons
 
 
+@dataclass
+class _DepthFit:
+    """Steps 2-5 from one lens: the samples, the choices made on them, and the joint fit."""
+
+    plane_samples: PlaneSamples
+    squares: str
+    sampled: list[str]   # why the convention and squares were chosen
+    options: CalibrationOptions   # with the depth convention chosen
+    start: bundle.State
+    fitted: Fitted
+    notes: list[str]
+
+
+def _depth_fit(prepared: list[Prepared], board: Board, lens: np.ndarray, corner_poses: np.ndarray | None,
+               obj: list[np.ndarray], guesses: list[np.ndarray], image_size: tuple[int, int],
+               options: CalibrationOptions, say: Callable[[str], None]) -> _DepthFit:
+    """2. the depth planarized at the corners, its samples chosen through ``lens``; 3. K from the
+    squares' size; 4. the poses from the 3D corners; 5. the joint fit in the model the data call
+    for (the depth's weight falls later, where it leaves the result worse than the corners alone)."""
+    notes: list[str] = []
+    plane_samples, squares, convention, sampled = _plane_samples(prepared, board, lens, corner_poses, image_size[0],
+                                                                 options, notes, say)
+    options = replace(options, depth_convention=convention)
+    intr, bias = _sized_intrinsics(prepared, plane_samples, obj, guesses, options, say)
+    observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
+    fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
+    return _DepthFit(plane_samples, squares, sampled, options, start, fitted, notes)
+
+
+def _squares_moved(prepared: list[Prepared], board: Board, first: np.ndarray, lens: np.ndarray) -> str | None:
+    """Why the plane samples must be chosen again through the lens the fit chose (None where they
+    need not): they were chosen through ``first`` (OpenCV's plumb_bob, or none), which at a wide
+    lens's edge puts the squares tens of pixels off, so an edge view's samples took in the wall (an
+    Azure Kinect wide lens: one view's depth 1.2 m off its corners, the calibration refused)."""
+    moved = [squares_moved(v.corners, v.ids, board, first, lens, v.depth.shape) for v in prepared]
+    worst = int(np.argmax(moved))
+    if moved[worst] <= SQUARE_MARGIN:
+        return None
+    far = sum(m > SQUARE_MARGIN for m in moved)
+    return (f"the lens chosen moves the squares of {far} of {len(moved)} views beyond the depth samples' margin "
+            f"({SQUARE_MARGIN:g} of a square) from where the first calibration's lens put them (view "
+            f"{prepared[worst].index}: {_squares(moved[worst])}): the samples were chosen again through it "
+            "and the depth fitted again")
+
+
+def _squares(moved: float) -> str:
+    """A move for a person: past a fold the first lens sends a pixel thousands of squares off."""
+    return f"{moved:.2f} squares" if moved < 10 else "more than 10 squares"
+
+
 def _sized_intrinsics(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray],
                       guesses: list[np.ndarray], options: CalibrationOptions, say: Callable[[str], None]
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -453,15 +512,18 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
                         obj, image_size)
     first, corner_poses = (guess, None) if trad is None else (trad.intrinsics, trad.poses)
-    plane_samples, squares, convention, sampled = _plane_samples(prepared, board, first, corner_poses, image_size[0],
-                                                                 options, notes, say)
-    options = replace(options, depth_convention=convention)
-    intr, bias = _sized_intrinsics(prepared, plane_samples, obj, [guess] if trad is None else [trad.intrinsics, guess],
-                                   options, say)
-    observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
-    # 5. the joint fit in the model the data call for, the depth's weight falling where it leaves
-    # the result worse than the corners alone
-    fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
+    guesses = [guess] if trad is None else [trad.intrinsics, guess]
+    depth_fit = _depth_fit(prepared, board, first, corner_poses, obj, guesses, image_size, options, say)
+    chosen_lens = depth_fit.fitted.fit.state.intrinsics
+    if (moved := _squares_moved(prepared, board, first, chosen_lens)) is not None:
+        say(moved)
+        depth_fit = _depth_fit(prepared, board, chosen_lens, corner_poses, obj, guesses, image_size, options, say)
+        depth_fit.sampled.append(moved)
+    plane_samples, squares, sampled, options, start, fitted = (
+        depth_fit.plane_samples, depth_fit.squares, depth_fit.sampled, depth_fit.options, depth_fit.start,
+        depth_fit.fitted)
+    convention = options.depth_convention
+    notes += depth_fit.notes
     found_wiggle = None
     if options.depth_bias == "auto" and options.modulation_hz is None:
         found_wiggle = look_for_wiggle(prepared, plane_samples, obj, fitted, start, options, say)

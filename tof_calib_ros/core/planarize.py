@@ -21,10 +21,11 @@ import cv2
 import numpy as np
 
 from .board import Board
-from .camera import rays, undistort_normalized
+from .camera import project, rays, undistort_normalized
 from .errors import CalibrationError
 
 MIN_PLANE_PIXELS = 30
+SQUARE_MARGIN = 0.15   # squares: how far the samples keep off a square's edges
 
 
 @dataclass
@@ -92,6 +93,31 @@ def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, 
     on = board.in_squared_area(bx, by, margin)
     lit = board.is_black(bx[on], by[on]) if turned else board.is_white(bx[on], by[on])
     return pix[on].astype(int), ~lit
+
+
+def squares_moved(corners: np.ndarray, ids: np.ndarray, board: Board, before: np.ndarray, after: np.ndarray,
+                  shape: tuple[int, int]) -> float:
+    """How far (in squares) the board point ``square_pixels`` sees at a pixel of the squared area
+    moves from lens ``before`` to lens ``after``: beyond the samples' margin, the squares chosen
+    through ``before`` take in their neighbours or the wall. Each lens maps the board through its
+    own homography of the corners, so a lens that fits the corners moves nothing."""
+    steps = 4   # points a square
+    u, v = np.meshgrid(np.arange(-steps, board.cols * steps + 1), np.arange(-steps, board.rows * steps + 1))
+    points = np.column_stack([u.ravel(), v.ravel()]) * board.square / steps
+    obj = board.object_points(ids)[:, :2]
+    H_after, _ = cv2.findHomography(obj, undistort_normalized(corners, after), 0)
+    H_before, _ = cv2.findHomography(obj, undistort_normalized(corners, before), 0)
+    if H_after is None or H_before is None:
+        return 0.0
+    xy = cv2.perspectiveTransform(points[None], H_after)[0]
+    pix = project(np.column_stack([xy, np.ones(len(xy))]), after).pixels
+    h, w = shape
+    seen = (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & (pix[:, 1] <= h - 1)
+    if not seen.any():
+        return 0.0
+    back = cv2.perspectiveTransform(undistort_normalized(pix[seen], before)[None], np.linalg.inv(H_before))[0]
+    moved = np.linalg.norm(back - points[seen], axis=1) / board.square
+    return float(np.max(moved, initial=0.0, where=np.isfinite(moved)))
 
 
 @lru_cache(maxsize=4)
@@ -190,7 +216,8 @@ class DepthSamples:
 
 
 def board_samples(depth: np.ndarray, corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray,
-                  amplitude: np.ndarray | None = None, margin: float = 0.15, squares: str = "white") -> DepthSamples:
+                  amplitude: np.ndarray | None = None, margin: float = SQUARE_MARGIN, squares: str = "white"
+                  ) -> DepthSamples:
     """The squares' pixels that are valid (not 0 or NaN) and not on a depth step."""
     pix, black = square_pixels(depth.shape, corners, ids, board, params, margin, amplitude, squares)
     if len(pix):
