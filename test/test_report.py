@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import re
 import struct
+from dataclasses import replace
 from html.parser import HTMLParser
 
 import cv2
@@ -15,7 +16,7 @@ from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core.camera import N_INTRINSICS
 from tof_calib_ros.core.projection_diff import projection_difference, projection_spread
 from tof_calib_ros.files.image_folder import load_views
-from tof_calib_ros.offline.report import ReportError, write_report
+from tof_calib_ros.offline.report import ReportError, _section_parameters, write_report
 
 BOARD = Board(8, 6, 0.04)
 CAM = sim.pmd_camera()
@@ -149,6 +150,17 @@ def test_the_parameters_are_those_of_the_result(report):
     assert sorted(map(int, per_view)) == [v.index for v in result.views]
     for v in result.views:
         assert _shows(per_view[str(v.index)][3], v.pixel_rms)
+
+
+def test_a_term_the_views_leave_free_is_shown_unconstrained_not_fixed(report):
+    """A rational lens's numerator and denominator terms can trade: their variance is infinite
+    (a NaN before 2026-11-30), which the table showed as "fixed"."""
+    _, result, _, _ = report
+    free = replace(result, std={**result.std, "k1": np.inf, "k2": np.inf})
+    page = _Page(_section_parameters(free))
+    rows = page.rows("parameters")
+    assert rows["k1"][1] == rows["k2"][1] == "unconstrained" and rows["k3"][1] == "fixed", rows
+    assert float(rows["fx"][1]) == pytest.approx(result.std["fx"], rel=0.06)
 
 
 def test_traditional_and_cross_validation_match_independent_calibrations(report):

@@ -529,7 +529,11 @@ def _pooled_sandwich(views: list[Observations], fit: Fit, alike: Fit, convention
     share = np.ones(len(J.view))
     share[:n_pixel_rows] = (fit.sigma_px / alike.sigma_px)[np.repeat(problem.view, 2)] ** 2
     bread = global_covariance(N)
-    return bread @ (profiled.T @ (profiled * share[:, None])) @ bread
+    unknown = np.isinf(np.diag(bread))   # unconstrained (a rational lens's trading terms): they stay so,
+    bread[unknown, unknown] = 0.0        # and their infinite variance must not make the rest NaN
+    cov = bread @ (profiled.T @ (profiled * share[:, None])) @ bread
+    cov[unknown, unknown] = np.inf
+    return cov
 
 
 def reweighted(views: list[Observations], fit: Fit, stated: Fit, convention: str,
@@ -553,7 +557,8 @@ def reweighted(views: list[Observations], fit: Fit, stated: Fit, convention: str
     beyond = np.isfinite(shift) & np.isfinite(apart) & (shift ** 2 > chi2.ppf(1 - JACKKNIFE_P, 1) * apart)
     excess = dict(zip(index, np.where(beyond, shift ** 2 - apart, 0.0)))
     var = np.maximum(np.diag(stated.covariance), 1e-300)
-    gain = np.sqrt((var + np.array([excess.get(i, 0.0) for i in stated.free_global])) / var)
+    extra = np.array([excess.get(i, 0.0) for i in stated.free_global])
+    gain = np.sqrt(1 + np.divide(extra, var, out=np.zeros_like(var), where=np.isfinite(var)))
     moved = {INTRINSIC_NAMES[i]: float(m) for i, m, b in zip(index, shift, beyond) if b}
     return replace(stated, covariance=stated.covariance * np.outer(gain, gain)), moved
 

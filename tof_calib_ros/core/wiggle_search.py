@@ -202,7 +202,9 @@ def within_corners(alone: bundle.Fit, averaged: bundle.Fit, corner_fit: bundle.F
     estimate: their own variance and the squared distance between the two. Beyond that, the depth
     models' disagreement says less of the focal length than the corners do: 12 consecutive real
     Kinect v2 views were stated 15-20 px apart where the corners alone gave about a third of it."""
-    spread = averaged.covariance - alone.covariance
+    known = np.isfinite(alone.covariance)   # an unconstrained term's variance is infinite in both
+    spread = np.zeros_like(alone.covariance)
+    spread[known] = averaged.covariance[known] - alone.covariance[known]
     corners = corner_fit.focal()   # fx, fy, their standard deviations
     scale = 1.0
     for k in (0, 1):

@@ -251,7 +251,10 @@ def _num(value: float, decimals: int) -> str:
 
 
 def _std(std: float) -> str:
-    """Two significant digits."""
+    """Two significant digits; an infinite one is a term the views leave free (a rational lens's
+    numerator and denominator trade), not one held fixed."""
+    if np.isinf(std):
+        return "unconstrained"
     if not (np.isfinite(std) and std > 0):
         return "fixed"
     return f"{std:.0f}" if std >= 10 else f"{std:#.2g}".rstrip(".")

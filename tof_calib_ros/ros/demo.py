@@ -81,8 +81,10 @@ def _table(truth: sim.SimCamera, factory: np.ndarray, result: dict) -> str:
     lines = [f"{'':14}{'truth':>12}{'factory (driver)':>18}{'calibrated':>14}{'± std':>10}{'error/std':>11}"]
     for name, t, f, c in rows:
         s = std.get(name, 0.0)
-        # a term the data did not call for is held at 0, not estimated: it has no error/std
-        tail = f"{s:10.2g}{(c - t) / s:11.1f}" if s > 0 else f"{'held at 0':>21}"
+        # a term the data did not call for is held at 0, not estimated: it has no error/std; one
+        # the views leave free has an infinite std, which the file writes as null
+        tail = f"{'unconstrained':>21}" if s is None else \
+            f"{s:10.2g}{(c - t) / s:11.1f}" if s > 0 else f"{'held at 0':>21}"
         lines.append(f"{name:14}{t:12.4f}{f:18.4f}{c:14.4f}{tail}")
     return "\n".join(lines)
 
