@@ -85,10 +85,30 @@ def test_a_wide_lens_no_polynomial_holds_is_calibrated_as_rational_and_refused_i
     assert np.median(ours_err) < 0.1 and np.median(their_err) > 10 * np.median(ours_err), (ours_err, their_err)
     assert res.to_dict()["distortion_model"] == "rational_polynomial" and res.D.size == 8
     assert res.lens_rms is None
+    # a square size 10 % too large is refused, in the rational lens: the depth fighting the corners
+    # left the lens chosen in a polynomial, which the corners alone did not hold, and the verdict
+    # asked for the rational lens (2026-11-30)
+    wrong = calibrate(views, Board(8, 6, 0.055))
+    assert wrong.model.distortion == "rational" and not wrong.ok, (wrong.model.reasons, wrong.verdict)
     # a polynomial asked for is refused, saying why
     full = calibrate(views, board, distortion="full")
     assert not full.ok and full.verdict[0].startswith("the lens bends more than full can follow"), full.verdict
     assert full.to_dict()["lens_rms_px"]["chosen"] > 2 * full.lens_rms[1]
+
+
+@pytest.mark.slow
+def test_a_wide_lens_with_a_square_size_10_percent_too_small_is_not_trusted():
+    """The wide lens, `wide_lens.py`'s seed 2, told 45 mm squares for 50 mm: trusted before
+    2026-11-30 (f083980), refused since."""
+    camera = sim.SimCamera(np.array(WIDE), 512, 512)
+    board = Board(8, 6, 0.05)
+    rng = np.random.default_rng(2)
+    views = []
+    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=(0.35, 0.9)):
+        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003, offset=0.01), rng=rng)
+        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    wrong = calibrate(views, Board(8, 6, 0.045))
+    assert not wrong.ok, (wrong.K[0, 0], wrong.std["fx"], wrong.model.reasons)
 
 
 @pytest.mark.slow

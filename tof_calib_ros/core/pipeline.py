@@ -209,7 +209,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
 
 def _calibrate_with_loss(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
     with single_threaded():
-        result = _calibrate(views, board, image_size, options, progress)
+        result = _calibrate_lens(views, board, image_size, options, progress)
         if options.loss is None:
             return result
         # A robust loss bounds a misdetected corner's pull but still lets it shape the first
@@ -219,11 +219,32 @@ def _calibrate_with_loss(views, board, image_size, options: CalibrationOptions, 
             return result
         cleaned = [View(v.depth, *_without(v, board, dropped.get(i, [])), v.amplitude)
                    for i, v in enumerate(views)]
-        again = _calibrate(cleaned, board, image_size, options, progress)
+        again = _calibrate_lens(cleaned, board, image_size, options, progress)
         again.model.dropped_corners = dropped
         again.notes.append("dropped outlier corners (view: board indices): "
                            + "; ".join(f"{i}: {ids}" for i, ids in sorted(dropped.items())))
         return again
+
+
+def _calibrate_lens(views, board, image_size, options: CalibrationOptions, progress) -> CalibrationResult:
+    """The calibration, and again in the rational lens where the lens the data chose leaves the
+    corners alone several times farther off than a rational lens does (the verdict's lens misfit):
+    the choice weighs the depth too, and a wrong square size, whose depth fights the corners, left
+    a wide Azure Kinect lens in a polynomial and the verdict asking for the rational lens before it
+    could say the square size was wrong."""
+    result = _calibrate(views, board, image_size, options, progress)
+    if options.distortion != "auto" or not result.lens_misfit:
+        return result
+    chosen, rational = result.lens_rms
+    why = (f"rational lens: the corners alone fit it {chosen / rational:.1f} times closer than "
+           f"{result.model.distortion} ({rational:.3f} against {chosen:.3f} px RMS), as a wide lens's do: "
+           "calibrated again in it")
+    if progress is not None:
+        progress(why)
+    again = _calibrate(views, board, image_size, replace(options, distortion="rational"), progress)
+    again.options = options
+    again.model.reasons.insert(0, why)
+    return again
 
 
 def _outlier_corners(result: CalibrationResult, views: Sequence[View], board: Board) -> dict[int, list[int]]:
@@ -342,17 +363,28 @@ class _DepthFit:
 
 def _depth_fit(prepared: list[Prepared], board: Board, lens: np.ndarray, corner_poses: np.ndarray | None,
                obj: list[np.ndarray], guesses: list[np.ndarray], image_size: tuple[int, int],
-               options: CalibrationOptions, say: Callable[[str], None]) -> _DepthFit:
+               options: CalibrationOptions, say: Callable[[str], None], chosen: Fitted | None = None) -> _DepthFit:
     """2. the depth planarized at the corners, its samples chosen through ``lens``; 3. K from the
     squares' size; 4. the poses from the 3D corners; 5. the joint fit in the model the data call
-    for (the depth's weight falls later, where it leaves the result worse than the corners alone)."""
+    for (the depth's weight falls later, where it leaves the result worse than the corners alone).
+    Given the fit ``chosen`` on samples chosen through another lens, its model is kept and fitted
+    again from its estimate: the corners chose the lens, and a choice made again let a wrong
+    square size, which the depth's new samples fit no better, fold the rational lens a wide
+    Azure Kinect lens needs (the verdict then asked for it instead of the right square size)."""
     notes: list[str] = []
     plane_samples, squares, convention, sampled = _plane_samples(prepared, board, lens, corner_poses, image_size[0],
                                                                  options, notes, say)
     options = replace(options, depth_convention=convention)
-    intr, bias = _sized_intrinsics(prepared, plane_samples, obj, guesses, options, say)
-    observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
-    fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
+    if chosen is None:
+        intr, bias = _sized_intrinsics(prepared, plane_samples, obj, guesses, options, say)
+        observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
+        fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
+    else:
+        state = chosen.fit.state
+        observations, start = _first_fit(prepared, plane_samples, obj, state.intrinsics, state.bias, options)
+        model = replace(chosen.model, reasons=list(chosen.model.reasons))
+        fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False,
+                                replace(options, distortion=model.distortion), say, model, list(chosen.free))
     return _DepthFit(plane_samples, squares, sampled, options, start, fitted, notes)
 
 
@@ -369,7 +401,7 @@ def _squares_moved(prepared: list[Prepared], board: Board, first: np.ndarray, le
     return (f"the lens chosen moves the squares of {far} of {len(moved)} views beyond the depth samples' margin "
             f"({SQUARE_MARGIN:g} of a square) from where the first calibration's lens put them (view "
             f"{prepared[worst].index}: {_squares(moved[worst])}): the samples were chosen again through it "
-            "and the depth fitted again")
+            "and the model fitted again on them")
 
 
 def _squares(moved: float) -> str:
@@ -517,7 +549,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     chosen_lens = depth_fit.fitted.fit.state.intrinsics
     if (moved := _squares_moved(prepared, board, first, chosen_lens)) is not None:
         say(moved)
-        depth_fit = _depth_fit(prepared, board, chosen_lens, corner_poses, obj, guesses, image_size, options, say)
+        depth_fit = _depth_fit(prepared, board, chosen_lens, corner_poses, obj, guesses, image_size, options, say,
+                               depth_fit.fitted)
         depth_fit.sampled.append(moved)
     plane_samples, squares, sampled, options, start, fitted = (
         depth_fit.plane_samples, depth_fit.squares, depth_fit.sampled, depth_fit.options, depth_fit.start,

@@ -161,7 +161,7 @@ class CalibrationResult:
         values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
-        misfit = self.lens_rms is not None and self.lens_rms[0] >= LENS_MISFIT * self.lens_rms[1]
+        misfit = self.lens_misfit
         if misfit:
             chosen, rational = self.lens_rms
             reasons.append(f"the lens bends more than {self.model.distortion} can follow: the corners fit a rational "
@@ -195,6 +195,11 @@ class CalibrationResult:
                            "degree of freedom): the lens model is too small for this lens, or the depth pulls the "
                            "camera off what the corners say (a depth error the model does not explain)")
         return reasons
+
+    @property
+    def lens_misfit(self) -> bool:
+        """Whether the corners alone fit a rational lens LENS_MISFIT times closer than the lens chosen."""
+        return self.lens_rms is not None and self.lens_rms[0] >= LENS_MISFIT * self.lens_rms[1]
 
     def _squares_look(self, ratio: float) -> str:
         """What a square size ``ratio`` times the given one would mean, for a person to check."""
