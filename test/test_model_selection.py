@@ -52,15 +52,22 @@ def test_the_distortion_terms_the_lens_has(lens, expected):
 WIDE = [252.0, 252.0, 256.5, 254.5, 4.7247, 3.2092, 1.2e-4, 5.9e-6, 0.1706, 5.0559, 4.7758, 0.8865]
 
 
+def _azure_views(camera: sim.SimCamera, board: Board, seed: int, distance: tuple[float, float]) -> list[View]:
+    """16 views as `wide_lens.py` renders them (its seeds): 0.05 px of corner noise, 3 mm of
+    depth noise and a 10 mm offset."""
+    rng = np.random.default_rng(seed)
+    views = []
+    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=distance):
+        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003, offset=0.01), rng=rng)
+        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    return views
+
+
 @pytest.mark.slow
 def test_a_wide_lens_no_polynomial_holds_is_calibrated_as_rational_and_refused_in_a_polynomial():
     camera = sim.SimCamera(np.array(WIDE), 512, 512)
     board = Board(8, 6, 0.05)
-    rng = np.random.default_rng(3)
-    views = []
-    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=(0.35, 0.9)):
-        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003, offset=0.01), rng=rng)
-        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    views = _azure_views(camera, board, 3, (0.35, 0.9))
     # the defaults: k3 folds the polynomial back inside the image, and the rational lens pays
     res = calibrate(views, board)
     assert res.model.distortion == "rational" and res.ok, (res.model.reasons, res.verdict)
@@ -102,11 +109,7 @@ def test_a_wide_lens_with_a_square_size_10_percent_too_small_is_not_trusted():
     2026-11-30 (f083980), refused since."""
     camera = sim.SimCamera(np.array(WIDE), 512, 512)
     board = Board(8, 6, 0.05)
-    rng = np.random.default_rng(2)
-    views = []
-    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=(0.35, 0.9)):
-        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003, offset=0.01), rng=rng)
-        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    views = _azure_views(camera, board, 2, (0.35, 0.9))
     wrong = calibrate(views, Board(8, 6, 0.045))
     assert not wrong.ok, (wrong.K[0, 0], wrong.std["fx"], wrong.model.reasons)
 
@@ -120,11 +123,7 @@ def test_a_lens_whose_k3_folds_in_the_image_is_calibrated_as_rational_on_the_def
     pays on the views and on views left out, is taken instead."""
     camera = sim.SimCamera(np.r_[504.0, 504.0, 321.5, 329.0, WIDE[4:]], 640, 576)
     board = Board(8, 6, 0.05)
-    rng = np.random.default_rng(1)
-    views = []
-    for rvec, tvec in sim.random_poses(camera, board, 16, rng, distance=(0.6, 1.6)):
-        f = sim.render(camera, board, rvec, tvec, noise=sim.Noise(depth=0.003, offset=0.01), rng=rng)
-        views.append(View(f.depth, f.corners + rng.normal(0, 0.05, f.corners.shape)))
+    views = _azure_views(camera, board, 1, (0.6, 1.6))
     res = calibrate(views, board)
     assert res.model.distortion == "rational" and res.ok, (res.model.reasons, res.verdict)
     assert any(r.startswith("rational lens: with k3 the polynomial folds back") for r in res.model.reasons)
