@@ -106,12 +106,16 @@ def test_a_wide_lens_no_polynomial_holds_is_calibrated_as_rational_and_refused_i
 @pytest.mark.slow
 def test_a_wide_lens_with_a_square_size_10_percent_too_small_is_not_trusted():
     """The wide lens, `wide_lens.py`'s seed 2, told 45 mm squares for 50 mm: trusted before
-    2026-11-30 (f083980), refused since."""
+    2026-11-30 (f083980), refused since, for the square size."""
     camera = sim.SimCamera(np.array(WIDE), 512, 512)
     board = Board(8, 6, 0.05)
     views = _azure_views(camera, board, 2, (0.35, 0.9))
     wrong = calibrate(views, Board(8, 6, 0.045))
     assert not wrong.ok, (wrong.K[0, 0], wrong.std["fx"], wrong.model.reasons)
+    # and for what it is: the lens turned rational only as the depth yielded, and the corners-alone
+    # reference stayed OpenCV's plumb_bob (fx +- 3.5 px), refusing it as poorly constrained
+    assert wrong.model.distortion == "rational" and "the squares look larger than the size given" in wrong.verdict[0]
+    assert wrong.depth_square == pytest.approx(0.05, rel=0.01), wrong.depth_square
 
 
 @pytest.mark.slow
