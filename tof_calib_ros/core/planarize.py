@@ -59,11 +59,9 @@ def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, 
     honoured. When the amplitude image is given, the brighter of the two square colourings is
     taken as white, which also covers boards whose colours are swapped by a 180 degree turn.
     """
-    obj = board.object_points(ids)[:, :2]
-    norm = undistort_normalized(corners, params)
-    if len(obj) < 4:
+    if len(corners) < 4:
         raise CalibrationError("planarization needs at least 4 corners in a view")
-    H, _ = cv2.findHomography(obj, norm, 0)
+    H = _board_homography(corners, ids, board, params)
     if H is None:
         raise CalibrationError("the corners of a view do not form a valid board (degenerate homography)")
     h, w = shape
@@ -95,6 +93,13 @@ def square_pixels(shape: tuple[int, int], corners: np.ndarray, ids: np.ndarray, 
     return pix[on].astype(int), ~lit
 
 
+def _board_homography(corners: np.ndarray, ids: np.ndarray, board: Board, params: np.ndarray) -> np.ndarray | None:
+    """The board plane (metres) to the corners' coordinates undistorted by ``params``' lens: how
+    the squares' pixels are found (None where the corners are degenerate)."""
+    H, _ = cv2.findHomography(board.object_points(ids)[:, :2], undistort_normalized(corners, params), 0)
+    return H
+
+
 def squares_moved(corners: np.ndarray, ids: np.ndarray, board: Board, before: np.ndarray, after: np.ndarray,
                   shape: tuple[int, int]) -> float:
     """How far (in squares) the board point ``square_pixels`` sees at a pixel of the squared area
@@ -104,9 +109,7 @@ def squares_moved(corners: np.ndarray, ids: np.ndarray, board: Board, before: np
     steps = 4   # points a square
     u, v = np.meshgrid(np.arange(-steps, board.cols * steps + 1), np.arange(-steps, board.rows * steps + 1))
     points = np.column_stack([u.ravel(), v.ravel()]) * board.square / steps
-    obj = board.object_points(ids)[:, :2]
-    H_after, _ = cv2.findHomography(obj, undistort_normalized(corners, after), 0)
-    H_before, _ = cv2.findHomography(obj, undistort_normalized(corners, before), 0)
+    H_after, H_before = (_board_homography(corners, ids, board, lens) for lens in (after, before))
     if H_after is None or H_before is None:
         return 0.0
     xy = cv2.perspectiveTransform(points[None], H_after)[0]
