@@ -262,9 +262,9 @@ def _without_k3(prepared, plane_samples, obj, observations, fit: bundle.Fit, fre
         return None
     model.distortion = "plumb_bob"
     model.evidence.setdefault("full", {})["folds_at_px"] = round(folds, 1)
-    model.reasons.append(f"k3 left out: with it the lens folds back {folds:.0f} px from the principal point, inside "
-                         "the image, " + ("where without it it does not fold" if alt_folds is None else
-                                          f"nearer than without it ({alt_folds:.0f} px)")
-                         + ": a k3 beyond what the views' corners reach")
+    without = ("where without it it does not fold" if alt_folds is None
+               else f"nearer than without it ({alt_folds:.0f} px)")
+    model.reasons.append(f"k3 left out, the distortion plumb_bob: with it the lens folds back {folds:.0f} px from "
+                         f"the principal point, inside the image, {without}: a k3 beyond what the views' corners reach")
     say(model.reasons[-1])
     return Fitted(alt, fewer, model, depths, planes, observations)
