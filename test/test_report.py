@@ -174,6 +174,9 @@ def test_traditional_and_cross_validation_match_independent_calibrations(report)
         assert float(rows[name][3]) == pytest.approx(trad.std[name], rel=0.06)
     assert rows["depth_offset"][2] == "—"
     assert _shows(rows["pixel RMS"][2], trad.pixel_rms)
+    # what the depth added: fx's uncertainty against OpenCV's on the same corners, each on its noise
+    assert result.depth_gain["fx"] == pytest.approx(trad.std["fx"] / result.noise_std["fx"], rel=0.06)
+    assert f"the depth made fx {result.depth_gain['fx']:.3g} and fy" in page.sections["summary"]
 
     used = [i for i in range(len(views)) if i != SHORT]
     # the halves in the views' order (a recording's), not alternate views

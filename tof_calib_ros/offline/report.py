@@ -331,7 +331,7 @@ def _section_summary(result: CalibrationResult, views: Sequence[View], options: 
         ["pixel RMS", _e(f"{result.pixel_rms:.3f} px")],
         ["depth RMS", _e(f"{result.depth_rms * 1e3:.2f} mm" if np.isfinite(result.depth_rms) else "no depth")],
         ["depth bias", _e(bias or "none estimated")],
-    ]
+    ] + ([] if result.depth_gain is None else [["what the depth added", _e(result.gain_brief())]])
     parts = [verdict, _table("summary-table", ["", ""], rows)]
     if result.rejected:
         parts.append("<p>Views left out:</p><ul>" + "".join(f"<li>view {k}: {_e(r)}</li>"
