@@ -132,7 +132,10 @@ def run_scale(views: list[View], scale: float, draws: int, jobs: int, full_refs:
         print(f"{name:18} {' '.join(f'{c:>16}' for c in cells)} {res.pixel_rms:7.3f} {dt:5.1f}  "
               f"(distortion {res.model.distortion}, depth {res.model.depth_bias}, planes {res.model.plane_squares}; "
               f"{'trusted' if res.ok else 'not trusted'})")
+        if res.depth_gain is not None:
+            print(f"{'':21}{res.gain_brief()}")
         report["reference"][name] = {"K": res.K.tolist(), "D": res.D.tolist(), "std": res.std,
+                                     "depth_gain": res.depth_gain,
                                      "depth_bias": res.depth_bias.tolist(), "pixel_rms": res.pixel_rms,
                                      "model": res.model.to_dict(), "trusted": res.ok}
         if res.run_intrinsics is not None:   # where over the image the projection is known (core.coverage)

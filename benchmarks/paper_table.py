@@ -153,6 +153,7 @@ def trial(args) -> dict:
             res = calibrate(views, BOARD, **(kwargs if name == "traditional" else {**kwargs, **told}))
             out[name] = dict(error_mm=score(res, poses, params), focal_rel=abs(res.K[0, 0] / F_TRUE - 1),
                              sigma_ok=bool(abs(res.K[0, 0] - F_TRUE) <= 2 * res.std["fx"]), trusted=res.ok,
+                             depth_gain=None if res.depth_gain is None else res.depth_gain["fx"],
                              seconds=time.perf_counter() - t0)
         except CalibrationError:
             out[name] = dict(error_mm=float("inf"), focal_rel=float("inf"), sigma_ok=False, trusted=False,
@@ -204,6 +205,9 @@ def main() -> None:
             row[m + "_seconds"] = float(np.median([g[m]["seconds"] for g in got]))
         row["ours_sigma_ok"] = float(np.mean([g["ours"]["sigma_ok"] for g in got]))
         row["ours_trusted"] = float(np.mean([g["ours"]["trusted"] for g in got]))
+        # what the depth added: fx's sigma from the corners alone over ours' (result.depth_gain)
+        row["ours_depth_gain"] = float(np.median([g["ours"]["depth_gain"] for g in got
+                                                  if g["ours"].get("depth_gain") is not None] or [np.nan]))
         # the worst outcome: trusted, with a stated uncertainty that misses the truth
         row["ours_trusted_wrong"] = float(np.mean([g["ours"]["trusted"] and not g["ours"]["sigma_ok"] for g in got]))
         row["ratio_traditional_over_ours"] = row["traditional"] / row["ours"]
@@ -259,6 +263,9 @@ def main() -> None:
             print("\n".join(_grid(sel, "traditional", "8.3f")))
             print("  ours, mm:")
             print("\n".join(_grid(sel, "ours", "8.3f")))
+            print("  what the depth added to ours: fx's sigma from the corners alone over ours', each on its noise "
+                  "(nan: the corners alone give none):")
+            print("\n".join(_grid(sel, "ours_depth_gain", "8.1f")))
             for b, what in (("corner_bound", "from the corners alone"), ("depth_bound", "with the depth")):
                 print(f"  the bound {what}, mm:")
                 print("\n".join(_grid(sel, b, "8.3f")))
