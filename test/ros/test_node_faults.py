@@ -15,6 +15,7 @@ Defined behaviour (README, "Concurrency and faults"):
 from __future__ import annotations
 
 import os
+import re
 import signal
 import threading
 import time
@@ -134,6 +135,11 @@ def test_commit_reports_an_absent_failing_or_slow_driver(launch, spinner, ros, t
     assert all(p.alive() for p in procs), logs(*procs)
 
 
+def _views_given(summary: str) -> int:
+    """The views a calibration was given, from its summary line ("12 of 14 views used")."""
+    return int(re.search(r"\d+ of (\d+) views used", summary)[1])
+
+
 def test_reset_while_calibrating_and_parameters_while_collecting(launch, spinner, tmp_path):
     ns, out = "/f2", tmp_path / "out"
     procs = _start(launch, ns, out)
@@ -143,7 +149,7 @@ def test_reset_while_calibrating_and_parameters_while_collecting(launch, spinner
                         ("sync.slop", 0.02), ("views.min", 8)]:
         assert set_parameter(spinner, node, name, value, procs) == (True, "")
     first = _calibrate_when_ready(spinner, ns, procs)
-    n_views = int(first.message.split(" of ")[1].split()[0])
+    n_views = _views_given(first.message)
 
     calibration = _call_async(spinner, f"{node}/calibrate")
     reset = spinner.call(Trigger, f"{node}/reset", timeout=10.0, procs=procs, resend_after=RESEND_S)
@@ -152,7 +158,7 @@ def test_reset_while_calibrating_and_parameters_while_collecting(launch, spinner
     assert reset.success and reset.message.startswith("cleared "), reset.message
     assert int(reset.message.split()[1]) >= n_views, reset.message   # the views were there, and went
     # the running calibration used the views it started with, all of them
-    assert resp.success and int(resp.message.split(" of ")[1].split()[0]) >= n_views, resp.message
+    assert resp.success and _views_given(resp.message) >= n_views, resp.message
     again = spinner.call(Trigger, f"{node}/calibrate", timeout=30.0, procs=procs)
     # after the reset: refused for want of views, or calibrated on views collected since (frames flow)
     assert again.success or "views collected" in again.message, again.message
