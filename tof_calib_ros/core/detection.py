@@ -52,6 +52,13 @@ IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)   # what 
 # v2 view at 205x170, after five others): seeded before each call, as a new process starts it
 # (OpenCV takes the seed 0 for its initial state), an image always gives the same corners.
 _SB_SEED = 0
+# A board this share of whose pixels sit at the image's brightest value has white squares that clip:
+# the edges its corners are placed by are flattened. Real Kinect v2 views with 25-48 % clipped had a
+# median pixel RMS of 0.08 px under OpenCV's fit, the others 0.037; rendered ones with 45 % or more,
+# 0.10 px off the truth a coordinate, unclipped 0.037 (docs/measurements.md, 2026-12-01).
+SATURATED_SHARE = 0.2
+CLIPPING_COSTS = ("which places the corners 2-3 times less accurately: lower the exposure, or hold the board "
+                  "farther")
 
 
 @dataclass(frozen=True)
@@ -135,6 +142,30 @@ def small(image: np.ndarray) -> bool:
     """Whether the detector sees ``image`` upscaled first: the images where boards of a few pixels'
     squares are missed without it, by the SB detector and by the quick search alike."""
     return min(image.shape) < UPSCALE_BELOW
+
+
+def saturation(image: np.ndarray, corners: np.ndarray) -> float:
+    """The share of the board's pixels (within its corners' hull) at the image's brightest value,
+    which is its full scale where it clips: the clipped squares' edges no longer say where the
+    corners are. Whatever the sensor's full scale (12 bits in 16, a float's 1.0)."""
+    img = np.asarray(image)
+    hull = cv2.convexHull(np.asarray(corners, dtype=np.float32).reshape(-1, 1, 2))
+    mask = np.zeros(img.shape[:2], np.uint8)
+    cv2.fillConvexPoly(mask, np.rint(hull).astype(np.int32), 1)
+    inside = img[mask > 0]
+    inside = inside[np.isfinite(inside)] if inside.dtype.kind == "f" else inside
+    if inside.size == 0:
+        return 0.0
+    top = np.nanmax(img) if img.dtype.kind == "f" else img.max()
+    return float(np.mean(inside == top))
+
+
+def clipped(share: float) -> str | None:
+    """What a person should hear of a board whose ``saturation`` is ``share``; None where it does
+    not clip enough to matter."""
+    if not share >= SATURATED_SHARE:
+        return None
+    return f"its white squares clip ({share:.0%} of the board at the amplitude's full scale), {CLIPPING_COSTS}"
 
 
 def detect(image: np.ndarray, board: Board, *, upscale: bool | None = None,
