@@ -257,3 +257,26 @@ def test_a_square_a_tenth_off_is_refused_saying_which_way(factor):
     assert f"the squares look {'larger' if factor < 1 else 'smaller'} than the size given" in reason, reason
     implied = float(re.search(r"the depth says ([\d.]+) mm, not the", reason)[1])
     assert implied == pytest.approx(BOARD.square * 1e3, rel=0.02), reason
+
+
+def test_views_whose_white_squares_clip_are_named_with_their_share():
+    """The result says which views' white squares clip, by how much, and what it costs (the corners'
+    accuracy: test_detection.py measures it), in its notes, its per-view figures and its file;
+    a view exposed within the amplitude's range is neither named nor marked."""
+    board = Board(5, 7, 0.03)
+    camera = sim.SimCamera(np.array([212.0, 212.0, 111.3, 86.6, -0.25, 0.08, 0.0, 0.0, 0.0]), 224, 171)
+    poses = sim.random_poses(camera, board, 4, rng=5, distance=(0.3, 0.5), max_tilt_deg=35)
+    gains = [0.6, 0.05, 0.05, 0.05]   # the first view at 2.4-6.7 times full scale, the rest at 0.2-0.6 of it
+    frames = [sim.render(camera, board, *p, noise=sim.Noise(amplitude=0.002), rng=k, gain=g)
+              for k, (p, g) in enumerate(zip(poses, gains))]
+    said: list[str] = []
+    res = calibrate([View(f.depth, amplitude=f.amplitude) for f in frames], board, method="traditional",
+                    progress=said.append)
+    shares = [v.saturation for v in res.views]
+    assert shares[0] >= 0.4 and max(shares[1:]) < 0.01, shares
+    note = next(n for n in res.notes if "clip" in n)
+    assert note.startswith("1 of 4 views' white squares clip (view 0: ") and "view 1" not in note, note
+    assert "less accurately: lower the exposure" in note and note in said
+    assert [v["saturation"] for v in res.to_dict()["views"]] == pytest.approx(shares)
+    given = calibrate([View(f.depth, corners=f.corners) for f in frames], board, method="traditional")
+    assert [v["saturation"] for v in given.to_dict()["views"]] == [None] * 4   # no amplitude: not known

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .board import Board, whole_number
-from .detection import Detection, detect
+from .detection import Detection, detect, saturation
 from .errors import CalibrationError
 
 NO_BOARD = "no board found"
@@ -37,6 +37,7 @@ class Prepared:
     corners: np.ndarray
     ids: np.ndarray
     amplitude: np.ndarray | None
+    saturation: float = float("nan")   # detection.saturation; NaN without an amplitude image
 
 
 # ToF cameras measure to some tens of metres at most: farther is a driver's sentinel (65535 mm) or
@@ -145,8 +146,9 @@ def prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | N
         if _on_a_line(corners, MIN_SPREAD_PX):
             rejected[i] = "its corners lie on one line in the image (a board seen edge on?)"
             continue
-        kept.append(Prepared(i, depth_in_metres(depth, depth_units), corners, ids,
-                             None if v.amplitude is None else np.asarray(v.amplitude)))
+        amplitude = None if v.amplitude is None else np.asarray(v.amplitude)
+        clipped = saturation(amplitude, corners) if amplitude is not None and amplitude.ndim == 2 else float("nan")
+        kept.append(Prepared(i, depth_in_metres(depth, depth_units), corners, ids, amplitude, clipped))
     return kept, rejected, (int(w), int(h))
 
 

@@ -27,7 +27,7 @@ from .coverage import reach
 from .depth_convention import convention_evidence
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, square_from_depth, update_intrinsics
 from .depth_trust import CORNER_FOLDS, CornersAlone, DepthCheck, bowl_check, depth_check, less_certain, why_yield
-from .detection import detect
+from .detection import CLIPPING_COSTS, SATURATED_SHARE, detect
 from .errors import CalibrationError
 from .inputs import Prepared, View, check_arguments, prepare, require
 from .model_choice import Fitted, choose_and_fit
@@ -128,7 +128,7 @@ def _report(views: list[Prepared], fit: bundle.Fit, planes: list[Plane] | None) 
             float(np.sqrt(np.mean(fin ** 2))) if fin.size else float("nan"), pix, dep,
             planes[j].sigma if planes and planes[j] else float("nan"),
             len(planes[j].pixels) if planes and planes[j] else 0,
-            planes[j].coef.copy() if planes and planes[j] else None))
+            planes[j].coef.copy() if planes and planes[j] else None, v.saturation))
     return out
 
 
@@ -534,6 +534,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     require(prepared, rejected, options.min_views, len(views))
     obj = [board.object_points(v.ids) for v in prepared]
     notes: list[str] = []
+    clipping = [v for v in prepared if v.saturation >= SATURATED_SHARE]
+    if clipping:
+        notes.append(f"{len(clipping)} of {len(prepared)} views' white squares clip ("
+                     + ", ".join(f"view {v.index}: {v.saturation:.0%}" for v in clipping)
+                     + f" of the board at the amplitude's full scale), {CLIPPING_COSTS}")
+        say(notes[-1])
     trad: Traditional | None = None
     # 1. traditional calibration: the baseline fits the lens model asked for; the depth method
     # starts from ROS's default

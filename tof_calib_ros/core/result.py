@@ -99,6 +99,7 @@ class ViewReport:
     plane_sigma: float = float("nan")   # m, noise of the white-square depth about its plane
     plane_pixels: int = 0
     plane: np.ndarray | None = None     # the depth plane, coef . X = 1 in the camera frame (see planarize.Plane)
+    saturation: float = float("nan")    # share of the board's amplitude pixels clipped (detection.saturation)
 
 
 @dataclass
@@ -281,6 +282,7 @@ class CalibrationResult:
                 "pixel_rms": v.pixel_rms, "depth_rms_m": v.depth_rms,
                 "plane_sigma_m": v.plane_sigma, "plane_pixels": v.plane_pixels,
                 "plane": None if v.plane is None else v.plane.tolist(),
+                "saturation": None if np.isnan(v.saturation) else v.saturation,
                 "pixel_residuals": v.pixel_residuals.tolist(),
                 "depth_residuals_m": np.where(np.isfinite(v.depth_residuals), v.depth_residuals, None).tolist(),
             } for v in self.views],
