@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from ..core.board import Board
-from ..core.detection import Detection
+from ..core.detection import Detection, clipped, saturation
 from ..core.errors import CalibrationError
 from ..core.inputs import View, depth_in_metres, depth_units
 from ..core.planarize import sample_depth, svd_plane
@@ -335,10 +335,12 @@ class ViewCollector:
         self._params.append(params)
         self._stamps.append(stamp)
         self._size = (w, h)
+        clip = clipped(saturation(amplitude, corners))
+        said = "" if clip is None else f"; {clip}"
         if replaced is not None:
-            return Outcome(True, f"accepted in place of a more redundant view ({cfg.max_views} views kept)", params,
-                           corners)
-        return Outcome(True, f"accepted as view {len(self._views)}", params, corners)
+            return Outcome(True, f"accepted in place of a more redundant view ({cfg.max_views} views kept){said}",
+                           params, corners)
+        return Outcome(True, f"accepted as view {len(self._views)}{said}", params, corners)
 
     def _remove(self, i: int) -> None:
         del self._views[i], self._params[i], self._stamps[i]

@@ -460,13 +460,14 @@ def _section_per_view(data: list[_ViewData], result: CalibrationResult) -> str:
     a.set_title("per-view RMS; the worst in red, the median dashed")
     rows = [[str(d.index), f"{np.median(d.distance):.3f}", f"{d.tilt_deg:.1f}", str(len(d.ids)),
              f"{rep.pixel_rms:.3f}", _num(rep.depth_rms * 1e3, 2), _num(rep.plane_sigma * 1e3, 2),
-             str(rep.plane_pixels)] for d, rep in zip(data, result.views)]
+             str(rep.plane_pixels), _num(rep.saturation * 100, 0)] for d, rep in zip(data, result.views)]
     return (f"<p>Worst by pixel RMS: {_e(_worst(pix, index, 'px'))}.<br>Worst by depth RMS: "
             f"{_e(_worst(dep, index, 'mm', 1e3))}.</p>"
             + _figure(fig, "per-view RMS", "Each view's pixel and depth RMS after the fit. A view far above the "
-                      "others is worth a look (a misdetected corner, a moving board, a depth artefact).")
+                      "others is worth a look (a misdetected corner, a moving board, a depth artefact, white "
+                      "squares that clip at the amplitude's full scale).")
             + _table("views", ["view", "distance (m)", "tilt (deg)", "corners", "pixel RMS (px)", "depth RMS (mm)",
-                               "plane σ (mm)", "plane pixels"], rows))
+                               "plane σ (mm)", "plane pixels", "clipped (% of the board)"], rows))
 
 
 def _section_coverage(data: list[_ViewData], result: CalibrationResult) -> str:
