@@ -99,7 +99,7 @@ def test_a_wide_lens_no_polynomial_holds_is_calibrated_as_rational_and_refused_i
     # a square size 10 % too large is refused, in the rational lens: the depth fighting the corners
     # left the lens chosen in a polynomial, which the corners alone did not hold, and the verdict
     # asked for the rational lens (2026-11-30)
-    # (2026-11-30); on the AMD EPYC machine of 2026-12-02 the samples chosen again through the
+    # On the AMD EPYC machine of 2026-12-02 the samples chosen again through the
     # rational lens chose full, which fits the corners as closely (0.0685 against 0.0683 px), and
     # it was refused for fx and fy poorly constrained (7.9 px), not for the square size
     wrong = calibrate(views, Board(8, 6, 0.055))

@@ -147,8 +147,8 @@ def prepare(views: Sequence[View], board: Board, image_size: tuple[int, int] | N
             rejected[i] = "its corners lie on one line in the image (a board seen edge on?)"
             continue
         amplitude = None if v.amplitude is None else np.asarray(v.amplitude)
-        clipped = saturation(amplitude, corners) if amplitude is not None and amplitude.ndim == 2 else float("nan")
-        kept.append(Prepared(i, depth_in_metres(depth, depth_units), corners, ids, amplitude, clipped))
+        share = saturation(amplitude, corners) if amplitude is not None and amplitude.ndim == 2 else float("nan")
+        kept.append(Prepared(i, depth_in_metres(depth, depth_units), corners, ids, amplitude, share))
     return kept, rejected, (int(w), int(h))
 
 

@@ -27,7 +27,7 @@ from .coverage import reach
 from .depth_convention import convention_evidence
 from .depth_init import focal_guess, pose_from_pixels, pose_from_points, square_from_depth, update_intrinsics
 from .depth_trust import CORNER_FOLDS, CornersAlone, DepthCheck, bowl_check, depth_check, less_certain, why_yield
-from .detection import CLIPPING_COSTS, SATURATED_SHARE, detect
+from .detection import CLIPPING_COSTS, clipped, detect
 from .errors import CalibrationError
 from .inputs import Prepared, View, check_arguments, prepare, require
 from .model_choice import Fitted, choose_and_fit
@@ -534,7 +534,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     require(prepared, rejected, options.min_views, len(views))
     obj = [board.object_points(v.ids) for v in prepared]
     notes: list[str] = []
-    clipping = [v for v in prepared if v.saturation >= SATURATED_SHARE]
+    clipping = [v for v in prepared if clipped(v.saturation)]
     if clipping:
         notes.append(f"{len(clipping)} of {len(prepared)} views' white squares clip ("
                      + ", ".join(f"view {v.index}: {v.saturation:.0%}" for v in clipping)
