@@ -63,10 +63,9 @@ class WiggleSearch:
 def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.State,
                     options: CalibrationOptions, say) -> WiggleSearch:
     """Without the modulation frequency: a wiggle at the candidate period whose score-test gain
-    is largest, looked for where that gain exceeds the price of its sine, cosine and period and
-    is not at either end of the periods looked for; refitted there and at the runner-up, the one
-    that fits better is taken where its amplitude is one a ToF camera can have and stands beyond
-    the views' jackknife, else the other where its is. The gain alone is not
+    is largest, taken where that gain exceeds the price of its sine, cosine and period, is not
+    at either end of the periods looked for, and where its amplitude, refitted at that period,
+    is one a ToF camera can have and stands beyond the views' jackknife. The gain alone is not
     enough: it counts every sample of the board, so it finds sub-millimetre structure on large
     recordings and, on the real Kinect v2 views (which unwrap three frequencies: no one
     sinusoid), wiggles of 2-4 mm (chi-square 5 to 10 against their jackknife, on 2 degrees of
@@ -112,72 +111,35 @@ def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.
                            "at the end of the periods looked for (an error, but not a wiggle of such a period)"))
         say(found.reason)
         return found
-    first, refusals = k, []
-    for k, refit in _refits_likeliest_first(prepared, plane_samples, obj, gains, price, views_at, start, options,
-                                            say):
-        hz = float(WIGGLE_CANDIDATES_HZ[k])
-        refused, z2 = _implausible(refit, gains[k], price, hz, options)
-        if refused is None:
-            break
-        refusals.append((refused, k, z2))
-    else:
-        # none credible: the reasons the likeliest one is not
-        found.reason, k, z2 = refusals[0]
-        evidence.update(gain=round(float(gains[k]), 3), **({} if z2 is None else {"amplitude_chi2": z2}))
-        say(found.reason)
-        return found
-    found.hz, found.refit = hz, refit
-    evidence.update(gain=round(float(gains[k]), 3), amplitude_chi2=z2)
-    amplitude = np.hypot(*refit.fit.state.bias[bias_model.TERMS["wiggle"]]) * 1e3
-    found.reason = (f"a wiggle in the depth of period {bias_model.wiggle_period(hz):.3f} m (as of {hz / 1e6:.0f} MHz) "
-                    f"chosen by the data: the score test's gain {gains[k]:.1f} against the price of its sine, "
-                    f"cosine and period, {price:.1f}; amplitude {amplitude:.1f} mm (chi-square {z2:.1f} against the "
-                    "views' jackknife)")
-    if k != first:
-        evidence["score_test_period_m"] = round(bias_model.wiggle_period(WIGGLE_CANDIDATES_HZ[first]), 4)
-        found.reason += ("; refitted, it fits the views better than the period the score test gains most at, "
-                         f"{evidence['score_test_period_m']:.3f} m, or that one's amplitude is not credible")
-    say(found.reason)
-    return found
-
-
-def _refits_likeliest_first(prepared, plane_samples, obj, gains: np.ndarray, price: float,
-                            views_at: list[list[bundle.Observations]], start: bundle.State,
-                            options: CalibrationOptions, say) -> list[tuple[int, Fitted]]:
-    """The wiggle refitted at the period the score test gains most at and at the runner-up (where
-    that too pays its price and is not at either end of the periods looked for), the one that fits
-    better (the lower deviance: their terms are as many) first. The score test is the refit's
-    first step from no wiggle, and between neighbouring periods it misleads: a pico flexx class
-    sensor's 8 views, 0.25-0.6 m away (less than one period), were given 0.579 m over 0.459 m (the
-    true period 0.468 m) in 8 of 16 seeds, fx up to 1.9 px off; refitted, all 16 chose 0.459 m."""
-    first, second = (int(i) for i in np.argsort(gains)[::-1][:2])
-    candidates = [first] + ([second] if gains[second] > price and second not in (0, len(gains) - 1) else [])
-    fits = [choose_and_fit(prepared, plane_samples, obj, views_at[k], start, False,
-                           replace(options, modulation_hz=float(WIGGLE_CANDIDATES_HZ[k])), say) for k in candidates]
-    order = np.argsort([bundle.deviance(f.observations, f.fit) for f in fits], kind="stable")
-    return [(candidates[i], fits[i]) for i in order]
-
-
-def _implausible(refit: Fitted, gain: float, price: float, hz: float,
-                 options: CalibrationOptions) -> tuple[str | None, float | None]:
-    """Why a wiggle refitted at the period of ``hz`` is not one a ToF camera has (None where it
-    is), and its amplitude's chi-square against its views' jackknife (None where not reached)."""
+    wiggly = replace(options, modulation_hz=hz)
+    refit = choose_and_fit(prepared, plane_samples, obj, views_at[k], start, False, wiggly, say)
     w = refit.fit.state.bias[bias_model.TERMS["wiggle"]]
     amplitude = f"{np.hypot(*w) * 1e3:.1f} mm"
     if np.hypot(*w) > MAX_WIGGLE_M:
-        return (f"no wiggle in the depth: the one the score test found (gain {gain:.1f} against its price "
-                f"{price:.1f}, at {hz / 1e6:.0f} MHz) would be {amplitude}, beyond any ToF camera's: over "
-                "the distances seen it is a depth scale (is the square size right, and the depth's units?)"), None
-    stated = bundle.jackknifed(refit.fit, bundle.fold_estimates(refit.observations, refit.fit, options.depth_convention,
-                                                                CORNER_FOLDS, refit.free, options.loss), refit.free)
+        found.reason = (f"no wiggle in the depth: the one the score test found (gain {gains[k]:.1f} against its price "
+                        f"{price:.1f}, at {hz / 1e6:.0f} MHz) would be {amplitude}, beyond any ToF camera's: over "
+                        "the distances seen it is a depth scale (is the square size right, and the depth's units?)")
+        say(found.reason)
+        return found
+    stated = bundle.jackknifed(refit.fit, bundle.fold_estimates(refit.observations, refit.fit, convention, CORNER_FOLDS,
+                                                                refit.free, options.loss), refit.free)
     at = np.isin(stated.free_global, bundle.WIGGLE)
     cov = stated.covariance[np.ix_(at, at)]
-    z2 = round(float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0, 3)
+    z2 = float(w @ np.linalg.solve(cov, w)) if np.all(np.isfinite(cov)) else 0.0
+    evidence["amplitude_chi2"] = round(z2, 3)
     if z2 <= scipy_chi2.ppf(1 - WIGGLE_P, 2):
-        return (f"no wiggle in the depth: the score test found one (gain {gain:.1f} against its price "
-                f"{price:.1f}, at {hz / 1e6:.0f} MHz), but its amplitude, {amplitude}, lies within its "
-                f"views' jackknife (chi-square {z2:.1f} on 2 degrees of freedom)"), z2
-    return None, z2
+        found.reason = (f"no wiggle in the depth: the score test found one (gain {gains[k]:.1f} against its price "
+                        f"{price:.1f}, at {hz / 1e6:.0f} MHz), but its amplitude, {amplitude}, lies within its "
+                        f"views' jackknife (chi-square {z2:.1f} on 2 degrees of freedom)")
+        say(found.reason)
+        return found
+    found.refit = refit
+    found.reason = (f"a wiggle in the depth of period {wiggly.wiggle_period:.3f} m (as of {hz / 1e6:.0f} MHz) "
+                    f"chosen by the data: the score test's gain {gains[k]:.1f} against the price of its sine, "
+                    f"cosine and period, {price:.1f}; amplitude {amplitude} (chi-square {z2:.1f} against the views' "
+                    "jackknife)")
+    say(found.reason)
+    return found
 
 
 def over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
@@ -210,8 +172,7 @@ def over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free:
     weights /= weights.sum()
     # the model fitted, as its free terms say: the yield loop chooses it again and may drop the
     # radial offset the search took
-    chosen = len(models) - len(search.gains) + int(np.argmin(abs(WIGGLE_CANDIDATES_HZ - search.hz))) \
-        if wiggle[0] in free \
+    chosen = len(models) - len(search.gains) + int(np.argmax(search.gains)) if wiggle[0] in free \
         else 1 if bundle.RADIAL in free else 0
     here = fit.state.globals_[fit.free_global]
     state = fit.state.copy()
