@@ -253,7 +253,12 @@ def _noisy(frames):
 @pytest.mark.parametrize("corrupt", [_shuffled, _swapped, _noisy], ids=["shuffled", "swapped", "noise-20px"])
 def test_corrupt_corners_fail_or_are_flagged(corrupt, tilted):
     outcome = _calibrate(corrupt(tilted), "depth")
-    _refused_or_flagged(outcome, "the corners and the depth disagree", "RMS")   # pixel or depth residuals
+    if isinstance(outcome, CalibrationError) and "the depth shows the board in" in str(outcome):
+        # shuffled corners put the squares' depth samples off the board: refused for that in one CI
+        # run (ci77) of the same code another run (ci76) refused for the disagreement
+        assert corrupt is _shuffled, str(outcome)
+    else:
+        _refused_or_flagged(outcome, "the corners and the depth disagree", "RMS")   # pixel or depth residuals
 
 
 @pytest.mark.parametrize("corrupt", [_shuffled, _noisy], ids=["shuffled", "noise-20px"])
