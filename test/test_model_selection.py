@@ -285,6 +285,32 @@ def test_the_depth_yields_where_what_its_model_leaves_open_makes_fx_less_certain
     assert abs(res.K[0, 0] - F) < 2 * res.std["fx"], (res.K[0, 0], res.std["fx"])
 
 
+def test_the_depth_is_judged_against_the_corners_in_its_own_lens(monkeypatch):
+    """The yield's reference, the corners alone, is fitted in the lens the result has: a k3 (here
+    asked for) leaves fx less certain than plumb_bob's corners however far the depth yields, and
+    against those the depth yielded to 64 times its noise, its most, where once was enough."""
+    from dataclasses import replace
+
+    from tof_calib_ros.core import pipeline
+    original, check = pipeline._widened, pipeline.depth_check
+
+    def wide_at_full_weight(observations, fit, *rest):
+        stated, why = original(observations, fit, *rest)
+        if observations[0].depth_inflation == 1.0:
+            stated = replace(stated, covariance=100 * stated.covariance)
+        return stated, why
+
+    views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=3, noise=sim.Noise(depth=0.01))
+    plumb_bob = calibrate(views, BOARD, distortion="plumb_bob", method="traditional")
+    monkeypatch.setattr(pipeline, "_widened", wide_at_full_weight)
+    monkeypatch.setattr(pipeline, "depth_check", lambda *a: replace(check(*a), over_distance=True))
+    res = calibrate(views, BOARD, distortion="full")
+    assert res.model.distortion == "full"
+    assert res.model.depth_inflation == pipeline.DEPTH_INFLATION_STEP, res.model.reasons
+    assert res.corner_focal[2] > plumb_bob.std["fx"], (res.corner_focal, plumb_bob.std)   # the reference has k3
+    assert abs(res.K[0, 0] - F) < 3 * res.std["fx"], (res.K[0, 0], res.std["fx"])
+
+
 @pytest.mark.slow
 def test_a_wiggling_depth_yields_to_the_corners():
     """15 mm of wiggling (a sinusoid of the distance, 1.87 m period, its phase drawn per seed):

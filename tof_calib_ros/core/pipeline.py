@@ -144,17 +144,18 @@ def _corner_fit(obj: list[np.ndarray], views: list[Prepared], start: Traditional
                         max_iter=max_iter)
 
 
-def _rational_reference(corner_fit: bundle.Fit | None, model: Model, obj: list[np.ndarray],
-                        views: list[Prepared], state: bundle.State, convention: str) -> bundle.Fit | None:
-    """The corners alone in the rational lens, from ``state``, where the result is rational and
-    they are not yet: a lens ROS's plumb_bob cannot hold bends the corners' own focal length in it
-    (a wide Azure Kinect lens: 6 % off, which the verdict took for a wrong square size; and in
-    plumb_bob its corners alone were stated +- 3.5 px, so a square size 10 % off was refused as
-    poorly constrained instead of for what it was)."""
-    if corner_fit is None or model.distortion != "rational" \
-            or set(DISTORTION_TERMS["rational"]) <= set(corner_fit.free_global.tolist()):
+def _lens_reference(corner_fit: bundle.Fit | None, model: Model, obj: list[np.ndarray],
+                    views: list[Prepared], state: bundle.State, convention: str) -> bundle.Fit | None:
+    """The corners alone in the chosen lens, from ``state``, where it has terms they were not fitted
+    in: the depth is judged against the corners in the same lens. A lens ROS's plumb_bob cannot
+    hold bends the corners' own focal length in it (a wide Azure Kinect lens: 6 % off, which the
+    verdict took for a wrong square size; and in plumb_bob its corners alone were stated +- 3.5 px,
+    so a square size 10 % off was refused as poorly constrained instead of for what it was); and a
+    k3 the depth's fit takes leaves fx less certain than plumb_bob's corners, however far the
+    depth yields (it yielded to 64 times its noise on a near tie)."""
+    if corner_fit is None or set(DISTORTION_TERMS[model.distortion]) <= set(corner_fit.free_global.tolist()):
         return corner_fit
-    return _corner_fit(obj, views, state, convention, "rational", max_iter=100)
+    return _corner_fit(obj, views, state, convention, model.distortion, max_iter=100)
 
 
 def _lens_rms(obj: list[np.ndarray], views: list[Prepared], state: bundle.State, convention: str,
@@ -584,7 +585,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fitted = found_wiggle.refit
     radial = found_wiggle is not None and found_wiggle.radial
     fit, free, model, depths, planes, observations = fitted
-    corner_fit = _rational_reference(corner_fit, model, obj, prepared, fit.state, convention)
+    corner_fit = _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)
     corners = None if corner_fit is None else CornersAlone(corner_fit, obj, prepared, image_size)
     check = depth_check(fit, depths, planes, corners, convention) \
         if options.depth_bias == "auto" else DepthCheck()
@@ -642,6 +643,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fit, free, chosen, depths, planes, observations = choose_and_fit(
                 prepared, plane_samples, obj, lighter, start, check.scale, options, say, radial=radial)
             model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
+            if (lensed := _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)) is not corner_fit:
+                corner_fit, corners = lensed, CornersAlone(lensed, obj, prepared, image_size)
             reason, estimates = why_yield(observations, fit, free, model, options, corners)
         stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle, corner_fit)
         worse = None
@@ -665,7 +668,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         model.reasons.append(averaged)
         say(averaged)
     # the lens may have turned rational as the depth yielded: the verdict's reference too
-    corner_fit = _rational_reference(corner_fit, model, obj, prepared, fit.state, convention)
+    corner_fit = _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)
     noise_fit = fit
     runs = bundle.fold_estimates(observations, fit, convention, RECORDING_RUNS, free, options.loss, consecutive=True)
     stated, spread = _over_runs(stated, runs, free)
