@@ -308,6 +308,7 @@ def test_the_depth_is_judged_against_the_corners_in_its_own_lens(monkeypatch):
     assert res.model.distortion == "full"
     assert res.model.depth_inflation == pipeline.DEPTH_INFLATION_STEP, res.model.reasons
     assert res.corner_focal[2] > plumb_bob.std["fx"], (res.corner_focal, plumb_bob.std)   # the reference has k3
+    assert res.corner_lens == "full" and "(full, on the noise of each)" in res.gain_brief()
     assert abs(res.K[0, 0] - F) < 3 * res.std["fx"], (res.K[0, 0], res.std["fx"])
 
 

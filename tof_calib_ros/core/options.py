@@ -18,6 +18,13 @@ from .errors import CalibrationError
 # last, rational (ROS's rational_polynomial), for wide lenses no polynomial holds.
 DISTORTION_TERMS = {"none": [], "k1": [4], "k1k2": [4, 5], "plumb_bob": [4, 5, 6, 7],
                     "full": [4, 5, 6, 7, 8], "rational": [4, 5, 6, 7, 8, 9, 10, 11]}
+
+
+def lens_named(terms) -> str:
+    """The lens whose distortion terms (intrinsics' indices) are ``terms``."""
+    return next(name for name, own in DISTORTION_TERMS.items() if own == sorted(terms))
+
+
 PLANE_SQUARES = ("auto", "white", "all")
 CONVENTIONS = ("auto", *DEPTH_CONVENTIONS)
 METHODS = ("depth", "traditional")

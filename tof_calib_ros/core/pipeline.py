@@ -31,7 +31,7 @@ from .detection import CLIPPING_COSTS, clipped, detect
 from .errors import CalibrationError
 from .inputs import Prepared, View, check_arguments, prepare, require
 from .model_choice import Fitted, choose_and_fit
-from .options import DISTORTION_TERMS, CalibrationOptions, Model
+from .options import DISTORTION_TERMS, CalibrationOptions, Model, lens_named
 from .planarize import (
     SQUARE_MARGIN,
     DepthSamples,
@@ -181,13 +181,16 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
     if not (np.all(np.isfinite(fit.state.intrinsics)) and np.all(np.isfinite(fit.state.bias))):
         raise CalibrationError("the joint fit diverged (non-finite parameters)")  # never NaN in a CameraInfo
     corner_focal = corner_noise = None
+    corner_lens = "plumb_bob"
     if corner_fit is not None:
         corner_focal = corner_fit.focal()
         corner_noise = noise_per_dof(corner_fit.pixel_residuals, len(corner_fit.free_global))
+        corner_lens = lens_named(corner_fit.free_global[4:].tolist())   # its terms after fx, fy, cx, cy
     return CalibrationResult(options.method, image_size, K, D, fit.state.bias.copy(),
                              fit.std(), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
                              board.square, corner_noise=corner_noise, noise_std=(noise_fit or fit).std(),
-                             depth_focal=depth_focal, run_intrinsics=None if runs is None else runs[:, :N_INTRINSICS])
+                             depth_focal=depth_focal, run_intrinsics=None if runs is None else runs[:, :N_INTRINSICS],
+                             corner_lens=corner_lens)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,

@@ -130,6 +130,7 @@ class CalibrationResult:
     extrapolated: Extrapolated | None = None
     # the corners alone: their pixel RMS in the lens chosen and in a rational lens (px), where checked
     lens_rms: tuple[float, float] | None = None
+    corner_lens: str = "plumb_bob"   # the lens the corners alone were fitted in (``corner_focal``)
 
     @property
     def depth_convention(self) -> str:
@@ -152,9 +153,10 @@ class CalibrationResult:
     @property
     def depth_gain(self) -> dict[str, float] | None:
         """How many times as certain fx and fy are with the depth as from the corners alone on the same
-        views, as ROS camera_calibration fits them (plumb_bob; rational where the result is): what the
-        depth helped. Each on its noise, as the refits that may widen the stated uncertainty are not run
-        on the corners alone. None where the corners alone were not fitted (the traditional method)."""
+        views, as ROS camera_calibration fits them (plumb_bob), or in the lens the result has where it
+        has more terms (``corner_lens``): what the depth helped. Each on its noise, as the refits that
+        may widen the stated uncertainty are not run on the corners alone. None where the corners alone
+        were not fitted (the traditional method)."""
         if self.corner_focal is None:
             return None
         _, _, sx, sy = self.corner_focal
@@ -241,9 +243,8 @@ class CalibrationResult:
     def gain_brief(self) -> str:
         """The depth's gain, for a person (with a depth_gain)."""
         g = self.depth_gain
-        lens = "rational" if self.model.distortion == "rational" else "plumb_bob"
         return (f"the depth made fx {g['fx']:.3g} and fy {g['fy']:.3g} times as certain as the corners alone "
-                f"({lens}, on the noise of each)")
+                f"({self.corner_lens}, on the noise of each)")
 
     def to_dict(self) -> dict:
         """Everything the result holds, as plain JSON-ready types."""
@@ -266,6 +267,7 @@ class CalibrationResult:
             "notes": list(self.notes),
             "corner_only_focal": None if self.corner_focal is None else dict(zip(
                 ("fx", "fy", "std_fx", "std_fy"), map(float, self.corner_focal))),
+            "corner_only_lens": None if self.corner_focal is None else self.corner_lens,
             "depth_gain": self.depth_gain,
             "corner_only_pixel_noise": None if self.corner_noise is None else dict(zip(
                 ("px", "dof"), self.corner_noise)),
