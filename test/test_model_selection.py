@@ -1,10 +1,12 @@
 """The model chosen by the data: each rule recovers the true model of a sensor made to have it."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core import camera as cam
-from tof_calib_ros.core import depth_bias
+from tof_calib_ros.core import depth_bias, pipeline
 from tof_calib_ros.sim import bound
 
 BOARD = Board(11, 11, 0.05)
@@ -232,9 +234,7 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     radial offset the search took: fx's uncertainty is then the average about the model actually
     fitted (its free terms say which), not about the one the search took. Here nothing is taken;
     told that the search took the radial offset, the average must come out the same."""
-    from dataclasses import replace
-
-    from tof_calib_ros.core import bundle, pipeline
+    from tof_calib_ros.core import bundle
     seen = []
     original = pipeline.over_wiggles
     monkeypatch.setattr(pipeline, "over_wiggles", lambda *a: seen.append(a) or original(*a))
@@ -250,6 +250,26 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
 
 
+def _widen_at_full_weight(monkeypatch) -> None:
+    """What the depth's model leaves open made ten times fx's own uncertainty, at the depth's full
+    weight only."""
+    original = pipeline._widened
+
+    def widened(observations, fit, *rest):
+        stated, why = original(observations, fit, *rest)
+        if observations[0].depth_inflation == 1.0:
+            stated = replace(stated, covariance=100 * stated.covariance)
+        return stated, why
+
+    monkeypatch.setattr(pipeline, "_widened", widened)
+
+
+def _unexplained_over_distance(monkeypatch) -> None:
+    """The depth check finds the depth's error over distance unexplained."""
+    check = pipeline.depth_check
+    monkeypatch.setattr(pipeline, "depth_check", lambda *a: replace(check(*a), over_distance=True))
+
+
 def test_the_depth_yields_where_what_its_model_leaves_open_makes_fx_less_certain_than_the_corners(monkeypatch):
     """Where the depth's error follows the distance in a way the model does not explain, the yield
     is judged on the uncertainty the result states, which adds what the depth's model leaves open
@@ -259,25 +279,14 @@ def test_the_depth_yields_where_what_its_model_leaves_open_makes_fx_less_certain
     weight only. Where the model explains the depth, the widening alone does not make it yield
     (near frontal, a radial offset modelled was 0.06 % off, and the corners alone 2.7 %); where
     the depth check finds the error over distance unexplained, the depth yields once, and says why."""
-    from dataclasses import replace
-
-    from tof_calib_ros.core import pipeline
-    original, check = pipeline._widened, pipeline.depth_check
-
-    def wide_at_full_weight(observations, fit, *rest):
-        stated, why = original(observations, fit, *rest)
-        if observations[0].depth_inflation == 1.0:
-            stated = replace(stated, covariance=100 * stated.covariance)
-        return stated, why
-
     views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=3, noise=sim.Noise(depth=0.01))
     plain = calibrate(views, BOARD)
     assert plain.model.depth_inflation == 1.0, plain.model.reasons
-    monkeypatch.setattr(pipeline, "_widened", wide_at_full_weight)
+    _widen_at_full_weight(monkeypatch)
     explained = calibrate(views, BOARD)
     assert explained.model.depth_inflation == 1.0, explained.model.reasons
     assert explained.std["fx"] > 5 * plain.std["fx"]   # the widening is there, and stated
-    monkeypatch.setattr(pipeline, "depth_check", lambda *a: replace(check(*a), over_distance=True))
+    _unexplained_over_distance(monkeypatch)
     res = calibrate(views, BOARD)
     assert res.model.depth_inflation == pipeline.DEPTH_INFLATION_STEP, res.model.reasons
     assert any("with what its model leaves open, left f" in r and "less certain than the corners alone" in r
@@ -289,21 +298,10 @@ def test_the_depth_is_judged_against_the_corners_in_its_own_lens(monkeypatch):
     """The yield's reference, the corners alone, is fitted in the lens the result has: a k3 (here
     asked for) leaves fx less certain than plumb_bob's corners however far the depth yields, and
     against those the depth yielded to 64 times its noise, its most, where once was enough."""
-    from dataclasses import replace
-
-    from tof_calib_ros.core import pipeline
-    original, check = pipeline._widened, pipeline.depth_check
-
-    def wide_at_full_weight(observations, fit, *rest):
-        stated, why = original(observations, fit, *rest)
-        if observations[0].depth_inflation == 1.0:
-            stated = replace(stated, covariance=100 * stated.covariance)
-        return stated, why
-
     views = _views([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0], 5, 16, seed=3, noise=sim.Noise(depth=0.01))
     plumb_bob = calibrate(views, BOARD, distortion="plumb_bob", method="traditional")
-    monkeypatch.setattr(pipeline, "_widened", wide_at_full_weight)
-    monkeypatch.setattr(pipeline, "depth_check", lambda *a: replace(check(*a), over_distance=True))
+    _widen_at_full_weight(monkeypatch)
+    _unexplained_over_distance(monkeypatch)
     res = calibrate(views, BOARD, distortion="full")
     assert res.model.distortion == "full"
     assert res.model.depth_inflation == pipeline.DEPTH_INFLATION_STEP, res.model.reasons
