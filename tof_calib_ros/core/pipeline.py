@@ -670,7 +670,8 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if averaged is not None:
         model.reasons.append(averaged)
         say(averaged)
-    # the lens may have turned rational as the depth yielded: the verdict's reference too
+    # the yield's loop keeps the reference in the lens it chooses; the scale's refit above does not
+    # (nor the checks at full weight after it): the verdict's reference at least is in the lens chosen
     corner_fit = _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)
     noise_fit = fit
     runs = bundle.fold_estimates(observations, fit, convention, RECORDING_RUNS, free, options.loss, consecutive=True)
