@@ -144,8 +144,8 @@ def _corner_fit(obj: list[np.ndarray], views: list[Prepared], start: Traditional
                         max_iter=max_iter)
 
 
-def _lens_reference(corner_fit: bundle.Fit | None, model: Model, obj: list[np.ndarray],
-                    views: list[Prepared], state: bundle.State, convention: str) -> bundle.Fit | None:
+def _lens_reference(corners: CornersAlone | None, model: Model, state: bundle.State,
+                    convention: str) -> CornersAlone | None:
     """The corners alone in the chosen lens, from ``state``, where it has terms they were not fitted
     in: the depth is judged against the corners in the same lens. A lens ROS's plumb_bob cannot
     hold bends the corners' own focal length in it (a wide Azure Kinect lens: 6 % off, which the
@@ -153,9 +153,10 @@ def _lens_reference(corner_fit: bundle.Fit | None, model: Model, obj: list[np.nd
     so a square size 10 % off was refused as poorly constrained instead of for what it was); and a
     k3 the depth's fit takes leaves fx less certain than plumb_bob's corners, however far the
     depth yields (it yielded to 64 times its noise on a near tie)."""
-    if corner_fit is None or set(DISTORTION_TERMS[model.distortion]) <= set(corner_fit.free_global.tolist()):
-        return corner_fit
-    return _corner_fit(obj, views, state, convention, model.distortion, max_iter=100)
+    if corners is None or set(DISTORTION_TERMS[model.distortion]) <= set(corners.fit.free_global.tolist()):
+        return corners
+    return CornersAlone(_corner_fit(corners.obj, corners.prepared, state, convention, model.distortion, max_iter=100),
+                        corners.obj, corners.prepared, corners.image_size)
 
 
 def _lens_rms(obj: list[np.ndarray], views: list[Prepared], state: bundle.State, convention: str,
@@ -558,10 +559,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         notes.append(f"{exc}; initialised from the depth data instead")
         say(notes[-1])
 
-    corner_fit = None if trad is None else _corner_fit(obj, prepared, trad, convention, lens)
+    corners = None if trad is None else \
+        CornersAlone(_corner_fit(obj, prepared, trad, convention, lens), obj, prepared, image_size)
     if options.method == "traditional":
         model = Model(distortion=lens, depth_bias="none", plane_squares="white", depth_convention=convention)
-        return _result(options, model, board, image_size, corner_fit, prepared, None, rejected, notes)
+        return _result(options, model, board, image_size, None if corners is None else corners.fit, prepared, None,
+                       rejected, notes)
 
     # 2. the depth planarized at the corners; 3. K from the squares' size; 4. the poses from the 3D corners
     guess = focal_guess([v.corners for v in prepared], [sample_depth(v.depth, v.corners) for v in prepared],
@@ -588,8 +591,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fitted = found_wiggle.refit
     radial = found_wiggle is not None and found_wiggle.radial
     fit, free, model, depths, planes, observations = fitted
-    corner_fit = _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)
-    corners = None if corner_fit is None else CornersAlone(corner_fit, obj, prepared, image_size)
+    corners = _lens_reference(corners, model, fit.state, convention)
     check = depth_check(fit, depths, planes, corners, convention) \
         if options.depth_bias == "auto" else DepthCheck()
     # Views whose depth bows off their planes by amounts that differ have an error over distance
@@ -607,11 +609,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if check.scale:
         fit, free, model, depths, planes, observations = choose_and_fit(prepared, plane_samples, obj, observations,
                                                                         fit.state, True, options, say, model, free)
+        corners = _lens_reference(corners, model, fit.state, convention)
     depth_focal, full_depths = fit.focal(), depths   # what the depth says at its full weight
     # The verdict refuses a depth this far off the corners at its full weight (a wrong square size
     # or depth unit) whatever its yield makes of the rest: the yield would only delay the refusal
     # (7 model choices, 5 of the 7.8 minutes a wrong unit took on 60 views)
-    refuted = corner_fit is not None and bool(focal_disagreements(depth_focal, corner_fit.focal()))
+    refuted = corners is not None and bool(focal_disagreements(depth_focal, corners.fit.focal()))
     found = ([] if found_wiggle is None else [found_wiggle.reason]) + [r for r in sampled if r] \
         + check.reasons
     model = replace(model, plane_squares=squares, reasons=model.reasons + found)
@@ -646,10 +649,10 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
             fit, free, chosen, depths, planes, observations = choose_and_fit(
                 prepared, plane_samples, obj, lighter, start, check.scale, options, say, radial=radial)
             model = replace(chosen, plane_squares=squares, reasons=chosen.reasons + found)
-            if (lensed := _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)) is not corner_fit:
-                corner_fit, corners = lensed, CornersAlone(lensed, obj, prepared, image_size)
+            corners = _lens_reference(corners, model, fit.state, convention)
             reason, estimates = why_yield(observations, fit, free, model, options, corners)
-        stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle, corner_fit)
+        stated, averaged = _widened(observations, fit, free, options, bowed, found_wiggle,
+                                    None if corners is None else corners.fit)
         worse = None
         if not refuted and corners is not None and unexplained:
             if estimates is None:   # the folds of the last fit, whose estimate the widening leaves as it was
@@ -670,9 +673,7 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     if averaged is not None:
         model.reasons.append(averaged)
         say(averaged)
-    # the yield's loop keeps the reference in the lens it chooses; the scale's refit above does not
-    # (nor the checks at full weight after it): the verdict's reference at least is in the lens chosen
-    corner_fit = _lens_reference(corner_fit, model, obj, prepared, fit.state, convention)
+    corner_fit = None if corners is None else corners.fit
     noise_fit = fit
     runs = bundle.fold_estimates(observations, fit, convention, RECORDING_RUNS, free, options.loss, consecutive=True)
     stated, spread = _over_runs(stated, runs, free)
