@@ -545,9 +545,10 @@ def test_a_short_wiggle_of_a_low_resolution_sensor_states_honest_sigmas():
     whose wiggle is short: not met. The errors lean one way (fx low in 12 of 16) and the depth's model claims up to 3
     times OpenCV's precision there. The true corners put fx 0.02 px RMS off; the same corners with iid
     noise as large as the detector's error on the clipped views (0.12 px) put it 1.43 px RMS off, one
-    seed 7.6 sigmas. Seed 16 over ten such draws: fx -1.82 px on average, stated +- 0.46, and -0.49
-    with no wiggle in the scene: the depth keeps an error of the wiggle's the model leaves, which
-    moves fx as the pixels' weight falls (docs/measurements.md, 2026-12-01 and 2026-12-02).
+    seed 7.6 sigmas. Seed 16 over ten such draws: fx -1.82 px on average, stated +- 0.46; -0.49 with
+    no wiggle in the scene, and -0.97 with the period given and neither depth noise nor a dark
+    offset: the corner depths made from noisy corners on a wiggling sensor are off in a way the
+    fit does not state (docs/measurements.md, 2026-12-01 and 2026-12-02).
     Weighing the wiggle's periods by their refits' deviances in
     fx's uncertainty (not the score test's gains) mended a 5-sigma case with the corners' true
     positions, but on paper_table's near-frontal wiggling rows put 91 % within 2 sigmas (95 %
