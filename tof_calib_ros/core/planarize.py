@@ -299,17 +299,19 @@ def fit_plane_to(directions: np.ndarray, depth: np.ndarray, pixels: np.ndarray, 
 
 
 def off_plane(plane: Plane, directions: np.ndarray, depth: np.ndarray, black: np.ndarray,
-              basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+              basis: np.ndarray, scatter: tuple[Plane, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """What the samples' depth off their fitted plane says of small depth terms (``basis`` (M, K),
     each term's depth at the samples) that curve across the board: the information (K, K) and
     the moment (K,) of the residuals' part the plane's three parameters cannot absorb, each
     sample weighted by its colour's noise. The terms' estimate from them is information^-1 moment.
     A plane keeps only a term's planar part; this is the rest, which near frontal is most of
     what the depth says of a wiggle. Noise shared between neighbouring pixels (a driver's
-    smoothing filter) makes the samples worth fewer: both are divided by ``noise_spread``."""
+    smoothing filter) makes the samples worth fewer: both are divided by ``noise_spread``.
+    ``scatter``: another plane and depth whose residuals give the noise instead."""
     r, J, w = _weighted_jacobian(plane, directions, depth, black)
+    noise, _, w = (r, J, w) if scatter is None else _weighted_jacobian(scatter[0], directions, scatter[1], black)
     off = basis - J @ _plane_change(J, w, basis)
-    offw = off * w[:, None] / noise_spread(plane.pixels, r * np.sqrt(w))
+    offw = off * w[:, None] / noise_spread(plane.pixels, noise * np.sqrt(w))
     return offw.T @ off, offw.T @ r
 
 
