@@ -6,7 +6,7 @@ import pytest
 
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core import camera as cam
-from tof_calib_ros.core import depth_bias, pipeline
+from tof_calib_ros.core import depth_bias, model_choice, pipeline
 from tof_calib_ros.sim import bound
 
 BOARD = Board(11, 11, 0.05)
@@ -633,13 +633,28 @@ def test_a_near_frontal_wiggle_of_given_period_on_a_quiet_sensor_is_within_its_s
     assert np.sqrt(np.mean(np.square(errors))) < 0.6, np.round(errors, 2)
 
 
+def _joints_views(monkeypatch, views: list[View], board: Board, **options) -> dict:
+    """The views as the joint fit is given them (prepared, their plane samples, the board points),
+    from calibrating ``views`` with ``options``."""
+    seen = {}
+    joint = model_choice.joint
+
+    def spy(prepared, plane_samples, obj, *args):
+        seen.update(prepared=prepared, samples=plane_samples, obj=obj)
+        return joint(prepared, plane_samples, obj, *args)
+
+    monkeypatch.setattr(model_choice, "joint", spy)
+    calibrate(views, board, **options)
+    return seen
+
+
 def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     """On noiseless depth with 15 mm of wiggling, the corner depths the planes give and the fit's
     model of them agree at the true intrinsics, bias and poses: each corner's wiggle is placed on
     the plane of the depth without it. Placed on the fitted plane (which holds the wiggle's planar
     part) the model was 0.2-0.35 mm off, a depth error of the fit's own making that near frontal
     moved fx by up to 1 px."""
-    from tof_calib_ros.core import bundle, model_choice, view_planes
+    from tof_calib_ros.core import bundle, view_planes
     lens = np.array([F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0])
     camera = sim.SimCamera(lens, 200, 200)
     period, phase = depth_bias.wiggle_period(20e6), 5.57
@@ -649,15 +664,7 @@ def test_the_fits_depth_model_is_exact_at_the_true_parameters(monkeypatch):
     ids = np.array([r * BOARD.cols + c for r in (0, 5, 10) for c in (0, 5, 10)])
     views = [View(f.depth, f.corners[ids], ids)
              for f in (sim.render(camera, BOARD, r, t, noise=noise, rng=rng) for r, t in poses)]
-    seen = {}
-    joint = model_choice.joint
-
-    def spy(prepared, plane_samples, obj, *args):
-        seen.update(prepared=prepared, samples=plane_samples, obj=obj)
-        return joint(prepared, plane_samples, obj, *args)
-
-    monkeypatch.setattr(model_choice, "joint", spy)
-    calibrate(views, BOARD, modulation_hz=20e6)
+    seen = _joints_views(monkeypatch, views, BOARD, modulation_hz=20e6)
     intr = np.r_[lens[:8], 0.0]
     bias = np.r_[0, 0, 0, 0, 0.015 * np.cos(phase), 0.015 * np.sin(phase), 0]
     depths, floors, _, wiggles, radials = view_planes.planarize_all(seen["prepared"], seen["samples"], intr, bias,
@@ -677,22 +684,14 @@ def test_the_wiggles_rows_read_the_true_wiggle_at_the_true_parameters(monkeypatc
     1 / (ray . coef), so the part of the wiggle it takes is not linear in the wiggle. There,
     without depth noise and with 0.12 px on the true corners, the fit followed the rows to fx
     1.3 and 1.2 px low in two draws (0.4 and 0.2 read off the planes fitted without it)."""
-    from tof_calib_ros.core import model_choice, view_planes
+    from tof_calib_ros.core import view_planes
     camera = sim.SimCamera(PICO, 224, 171)
     period, phase = depth_bias.wiggle_period(80e6), 2.0
     noise = sim.Noise(depth=1e-7, offset=0.01, wiggle_amplitude=0.015, wiggle_period=period, wiggle_phase=phase)
     rng = np.random.default_rng(16)
     poses = sim.random_poses(camera, Board(5, 7, 0.03), 8, rng, distance=(0.25, 0.6), max_tilt_deg=45)
     frames = [sim.render(camera, Board(5, 7, 0.03), r, t, noise=noise, rng=rng) for r, t in poses]
-    seen = {}
-    joint = model_choice.joint
-
-    def spy(prepared, plane_samples, obj, *args):
-        seen.update(prepared=prepared, samples=plane_samples)
-        return joint(prepared, plane_samples, obj, *args)
-
-    monkeypatch.setattr(model_choice, "joint", spy)
-    calibrate([View(f.depth, f.corners) for f in frames], Board(5, 7, 0.03), modulation_hz=80e6)
+    seen = _joints_views(monkeypatch, [View(f.depth, f.corners) for f in frames], Board(5, 7, 0.03), modulation_hz=80e6)
     wiggle = 0.015 * np.array([np.cos(phase), np.sin(phase)])
     bias = np.r_[0.01, 0, 0, 0, wiggle, 0]
     rows = view_planes.planarize_all(seen["prepared"], seen["samples"], PICO, bias, "z", period).wiggles

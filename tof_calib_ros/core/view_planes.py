@@ -142,17 +142,17 @@ def _wiggle_shapes(plane: Plane, su: np.ndarray, flat: np.ndarray, bias: np.ndar
     fitted = smoothed(plane, su, flat)
     on_plane = bias_model.measured(planar, fitted, su * fitted[:, None])
     along_su, along_u = np.linalg.norm(su, axis=1), np.linalg.norm(u, axis=1)
+    bases = []
+    for period in periods:
+        corrected = bias_model.true_depth(bias, on_plane, su, period)
+        bases.append(bias_model.wiggle_basis(period, corrected, corrected * along_su))
     if not wiggle.any():   # a search over periods: each period's terms off the one plane, sharing its noise weights
-        bases = [bias_model.wiggle_basis(p, c, c * along_su)
-                 for p in periods for c in [bias_model.true_depth(bias, on_plane, su, p)]]
         information, moment = off_plane(plane, su, flat, smp.black, np.hstack(bases))
         return [bundle.WiggleShape(_corner_curve(plane, su, flat, smp.black, b, u, p, along_u),
                                    information[2 * k:2 * k + 2, 2 * k:2 * k + 2], moment[2 * k:2 * k + 2])
                 for k, (p, b) in enumerate(zip(periods, bases))]
     shapes = []
-    for period in periods:
-        corrected = bias_model.true_depth(bias, on_plane, su, period)
-        basis = bias_model.wiggle_basis(period, corrected, corrected * along_su)
+    for period, basis in zip(periods, bases):
         clean = flat - basis @ wiggle
         at_plane = fit_plane_to(su, clean, smp.pixels, smp.black)
         # the depth off the plane fitted with the estimate taken out says how far the estimate is off:
