@@ -16,6 +16,9 @@ from .planarize import Plane
 from .view_planes import planarize_all, radial_may_enter, view_observations
 
 MAX_OUTER_ROUNDS = 6
+# Anderson's step beyond a round's output, at most this many times the round's own move: 1.8 lands on
+# the fixed point of a map that keeps 0.64 of each move (the pico flexx class sensor's slowest)
+MAX_MIXED_STEP = 2.0
 HELD_OUT_FOLDS = 5
 K3 = DISTORTION_TERMS["full"][-1]
 # 'auto' grows the polynomial presets, and tries the rational lens only where k3 folds the lens in
@@ -113,27 +116,65 @@ def joint(prepared, plane_samples, obj, observations, state, free, options: Cali
     """The joint fit, re-planarizing with its K and bias until no estimated parameter moves by a
     hundredth of its own uncertainty (the paper re-planarizes once; a few rounds make
     noiseless data exact). Returns the fit, the corner depths, the planes and the observations
-    they make (at the depth's inflation the given ones have)."""
+    they make (at the depth's inflation the given ones have).
+
+    Each round is a map from the K and bias the views were planarized with to the fit's; its
+    fixed point is the answer. Plain rounds settle slowly where the map contracts weakly (each
+    round moved the pico flexx class sensor's fx 0.25-0.64 times the last, and 6 rounds left it
+    short) and swing between two states where it overshoots (few corners a view), so from the
+    third round the point planarized at is Anderson's mixing of the rounds so far."""
     inflation = observations[0].depth_inflation
     convention = options.depth_convention
+    at, rounds = None, []
     for round_ in range(MAX_OUTER_ROUNDS):
-        before = state.globals_
         fit = bundle.solve(observations, state, convention, free, loss=options.loss,
                            wiggle_period=options.wiggle_period)
         state = fit.state
         say(f"joint fit, round {round_ + 1}: fx={state.intrinsics[0]:.3f} "
             f"fy={state.intrinsics[1]:.3f} offset={state.bias[0] * 1e3:.1f} mm, {fit.iterations} iterations")
-        depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, state.intrinsics,
-                                                                 state.bias, convention, options.wiggle_period,
-                                                                 radial_may_enter(options))
-        observations = view_observations(obj, prepared, depths, floors, wiggles, radials, inflation)
-        change = np.abs(state.globals_ - before)[fit.free_global]
+        mapped = state.globals_
         std = np.sqrt(np.maximum(np.diag(fit.covariance), 0))
         # the first round starts where the model's choice left it, on the same observations: only
         # from the second does a small move say the observations have stopped changing
-        if round_ and np.all(change <= np.maximum(0.01 * std, 1e-12 * np.abs(before[fit.free_global]))):
+        settled = at is not None and np.all(np.abs(mapped - at)[fit.free_global]
+                                            <= np.maximum(0.01 * std, 1e-12 * np.abs(at[fit.free_global])))
+        if at is not None:
+            rounds.append((at, mapped))
+            if len(rounds) > 1 and _moved(rounds[-1], fit.free_global, std) > _moved(rounds[-2], fit.free_global, std):
+                rounds = rounds[-1:]  # the map is not smooth here: mixing extrapolates nonsense
+        last = settled or round_ == MAX_OUTER_ROUNDS - 1
+        at = mapped if last else _mixed(rounds, fit.free_global, std, mapped)
+        planar = bundle.State(at[:N_INTRINSICS], at[N_INTRINSICS:], state.poses)
+        depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, planar.intrinsics,
+                                                                 planar.bias, convention, options.wiggle_period,
+                                                                 radial_may_enter(options))
+        observations = view_observations(obj, prepared, depths, floors, wiggles, radials, inflation)
+        if settled:
             break
     return fit, depths, planes, observations
+
+
+def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: np.ndarray,
+           mapped: np.ndarray, depth: int = 3) -> np.ndarray:
+    """Anderson's mixing: the combination of the last rounds' outputs whose residual (output less
+    input, in units of each free parameter's uncertainty ``std``) is least; the latest output
+    where there are fewer than two rounds to mix."""
+    if len(rounds) < 2:
+        return mapped
+    recent = rounds[-depth - 1:]
+    scale = np.where(std > 0, std, 1.0)
+    g = np.array([(out - inp)[free] / scale for inp, out in recent])
+    f = np.array([out[free] for _, out in recent])
+    gamma = np.linalg.lstsq((g[1:] - g[:-1])[::-1].T, g[-1], rcond=None)[0]
+    step = -gamma @ (f[1:] - f[:-1])[::-1] / scale
+    mixed = mapped.copy()
+    mixed[free] += step * min(1.0, MAX_MIXED_STEP * np.linalg.norm(g[-1]) / max(np.linalg.norm(step), 1e-300)) * scale
+    return mixed
+
+
+def _moved(round_: tuple[np.ndarray, np.ndarray], free: np.ndarray, std: np.ndarray) -> float:
+    """How far a round moved the free globals, in their uncertainties."""
+    return float(np.linalg.norm((round_[1] - round_[0])[free] / np.where(std > 0, std, 1.0)))
 
 
 class Fitted(NamedTuple):
