@@ -158,17 +158,17 @@ def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: n
            mapped: np.ndarray, depth: int = 3) -> np.ndarray:
     """Anderson's mixing: the combination of the last rounds' outputs whose residual (output less
     input, in units of each free parameter's uncertainty ``std``) is least; the latest output
-    where there are fewer than two rounds to mix."""
-    if len(rounds) < 2:
-        return mapped
+    where there are fewer than two rounds to mix or a parameter has no finite uncertainty."""
     recent = rounds[-depth - 1:]
-    scale = np.where(std > 0, std, 1.0)
-    g = np.array([(out - inp)[free] / scale for inp, out in recent])
+    g = np.array([(out - inp)[free] / std for inp, out in recent])
     f = np.array([out[free] for _, out in recent])
+    finite = np.all((std > 0) & np.isfinite(std)) and np.all(np.isfinite(g)) and np.all(np.isfinite(f))
+    if len(rounds) < 2 or not finite:
+        return mapped  # nothing to mix, or a degenerate fit (a depth that shows no board)
     gamma = np.linalg.lstsq((g[1:] - g[:-1])[::-1].T, g[-1], rcond=None)[0]
-    step = -gamma @ (f[1:] - f[:-1])[::-1] / scale
+    step = -gamma @ (f[1:] - f[:-1])[::-1] / std
     mixed = mapped.copy()
-    mixed[free] += step * min(1.0, MAX_MIXED_STEP * np.linalg.norm(g[-1]) / max(np.linalg.norm(step), 1e-300)) * scale
+    mixed[free] += step * min(1.0, MAX_MIXED_STEP * np.linalg.norm(g[-1]) / max(np.linalg.norm(step), 1e-300)) * std
     return mixed
 
 
