@@ -140,8 +140,10 @@ def joint(prepared, plane_samples, obj, observations, state, free, options: Cali
                                             <= np.maximum(0.01 * std, 1e-12 * np.abs(at[fit.free_global])))
         if at is not None:
             rounds.append((at, mapped))
-            if len(rounds) > 1 and _moved(rounds[-1], fit.free_global, std) > _moved(rounds[-2], fit.free_global, std):
-                rounds = rounds[-1:]  # the map is not smooth here: mixing extrapolates nonsense
+        if not np.all(np.isfinite(std) & (std > 0)):
+            rounds = []  # a degenerate fit (a depth that shows no board): no uncertainty to scale a step by
+        elif len(rounds) > 1 and _moved(rounds[-1], fit.free_global, std) > _moved(rounds[-2], fit.free_global, std):
+            rounds = rounds[-1:]  # the map is not smooth here: mixing extrapolates nonsense
         last = settled or round_ == MAX_OUTER_ROUNDS - 1
         at = mapped if last else _mixed(rounds, fit.free_global, std, mapped)
         planar = bundle.State(at[:N_INTRINSICS], at[N_INTRINSICS:], state.poses)
@@ -158,13 +160,12 @@ def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: n
            mapped: np.ndarray, depth: int = 3) -> np.ndarray:
     """Anderson's mixing: the combination of the last rounds' outputs whose residual (output less
     input, in units of each free parameter's uncertainty ``std``) is least; the latest output
-    where there are fewer than two rounds to mix or a parameter has no finite uncertainty."""
+    where there are fewer than two rounds to mix."""
+    if len(rounds) < 2:
+        return mapped
     recent = rounds[-depth - 1:]
     g = np.array([(out - inp)[free] / std for inp, out in recent])
     f = np.array([out[free] for _, out in recent])
-    finite = np.all((std > 0) & np.isfinite(std)) and np.all(np.isfinite(g)) and np.all(np.isfinite(f))
-    if len(rounds) < 2 or not finite:
-        return mapped  # nothing to mix, or a degenerate fit (a depth that shows no board)
     gamma = np.linalg.lstsq((g[1:] - g[:-1])[::-1].T, g[-1], rcond=None)[0]
     step = -gamma @ (f[1:] - f[:-1])[::-1] / std
     mixed = mapped.copy()
@@ -174,7 +175,7 @@ def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: n
 
 def _moved(round_: tuple[np.ndarray, np.ndarray], free: np.ndarray, std: np.ndarray) -> float:
     """How far a round moved the free globals, in their uncertainties."""
-    return float(np.linalg.norm((round_[1] - round_[0])[free] / np.where(std > 0, std, 1.0)))
+    return float(np.linalg.norm((round_[1] - round_[0])[free] / std))
 
 
 class Fitted(NamedTuple):
