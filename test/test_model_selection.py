@@ -748,3 +748,32 @@ def test_the_joints_mixing_lands_on_the_fixed_point_of_rounds_that_swing_or_craw
     for _ in range(50):
         plain = mapped(plain)
     assert np.max(np.abs(plain[free] - fixed) / std[free]) > 1, "plain rounds settle on this map"
+
+
+def test_a_choice_started_from_a_larger_models_fit_estimates_or_drops_its_terms(monkeypatch):
+    """The choice is made again from the state an earlier fit left (a wiggle found after the lens
+    was chosen); it holds no term it does not estimate at that fit's value. A pinhole scene
+    started where a fit in a strong lens and a depth tilt left off: with k3 held at -1.69, the
+    choice took plumb_bob and a tilt the scene does not have to make up for it (paper_table's 4
+    corners x 3 images with 15 mm of wiggling: fx 3.6 % off, 58 mm); dropped, the choice lands
+    where it does from a clean start."""
+    seen = {}
+    select = model_choice.select_model
+
+    def spy(observations, state, *args, **kwargs):
+        seen.setdefault("args", (observations, state.copy(), *args))
+        return select(observations, state, *args, **kwargs)
+
+    monkeypatch.setattr(model_choice, "select_model", spy)
+    calibrate(_views([F, F, 99.5, 99.5, 0, 0, 0, 0, 0], 4, 9, seed=3), BOARD)
+    observations, clean, convention, options = seen["args"][:4]
+    larger = clean.copy()
+    larger.intrinsics[4:] = [-0.43, 1.04, 0.003, -0.01, -1.69] + [0.0] * (len(larger.intrinsics) - 9)
+    larger.bias[depth_bias.TERMS["tilt"]] = [0.068, -0.018]
+    got = {}
+    for name, start in (("clean", clean), ("larger", larger)):
+        state, free, model = select(observations, start, convention, options, lambda _m: None)
+        held = np.setdiff1d(np.arange(4, len(state.globals_)), free)
+        assert np.all(state.globals_[held] == 0), (name, model.distortion, model.depth_bias, state.globals_[held])
+        got[name] = state.intrinsics[0]
+    assert got["larger"] == pytest.approx(got["clean"], rel=1e-4) and got["clean"] == pytest.approx(F, rel=5e-3), got
