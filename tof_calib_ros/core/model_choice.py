@@ -156,9 +156,8 @@ def joint(prepared, plane_samples, obj, observations, state, free, options: Cali
             rounds = rounds[-1:]  # the map is not smooth here: mixing extrapolates nonsense
         last = settled or round_ == MAX_OUTER_ROUNDS - 1
         at = mapped if last else _mixed(rounds, fit.free_global, std, mapped)
-        planar = bundle.State(at[:N_INTRINSICS], at[N_INTRINSICS:], state.poses)
-        depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, planar.intrinsics,
-                                                                 planar.bias, convention, options.wiggle_period,
+        depths, floors, planes, wiggles, radials = planarize_all(prepared, plane_samples, at[:N_INTRINSICS],
+                                                                 at[N_INTRINSICS:], convention, options.wiggle_period,
                                                                  radial_may_enter(options))
         observations = view_observations(obj, prepared, depths, floors, wiggles, radials, inflation)
         if settled:
@@ -174,7 +173,7 @@ def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: n
     if len(rounds) < 2:
         return mapped
     recent = rounds[-depth - 1:]
-    g = np.array([(out - inp)[free] / std for inp, out in recent])
+    g = np.array([_move(r, free, std) for r in recent])
     f = np.array([out[free] for _, out in recent])
     gamma = np.linalg.lstsq((g[1:] - g[:-1])[::-1].T, g[-1], rcond=None)[0]
     step = -gamma @ (f[1:] - f[:-1])[::-1] / std
@@ -183,9 +182,14 @@ def _mixed(rounds: list[tuple[np.ndarray, np.ndarray]], free: np.ndarray, std: n
     return mixed
 
 
+def _move(round_: tuple[np.ndarray, np.ndarray], free: np.ndarray, std: np.ndarray) -> np.ndarray:
+    """A round's move of the free globals (output less input), in their uncertainties."""
+    return (round_[1] - round_[0])[free] / std
+
+
 def _moved(round_: tuple[np.ndarray, np.ndarray], free: np.ndarray, std: np.ndarray) -> float:
     """How far a round moved the free globals, in their uncertainties."""
-    return float(np.linalg.norm((round_[1] - round_[0])[free] / std))
+    return float(np.linalg.norm(_move(round_, free, std)))
 
 
 class Fitted(NamedTuple):
