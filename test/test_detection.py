@@ -310,7 +310,7 @@ def test_a_located_board_sharpened_is_as_accurate_as_detected_and_never_relabell
 def _pico_frames(gain: float, seed: int) -> list[sim.Frame]:
     """A pico flexx class camera (224x171) 0.25-0.6 m from the board: at the renderer's default
     gain a white square there is 1.7-9.6 times the amplitude's full scale."""
-    camera = sim.SimCamera(np.array([212.0, 212.0, 111.3, 86.6, -0.25, 0.08, 0.0, 0.0, 0.0]), 224, 171)
+    camera = sim.pico_flexx_camera()
     rng = np.random.default_rng(seed)
     poses = sim.random_poses(camera, KINECT_BOARD, 6, rng, distance=(0.25, 0.6), max_tilt_deg=45)
     return [sim.render(camera, KINECT_BOARD, *p, noise=sim.Noise(amplitude=0.01), rng=rng, gain=gain) for p in poses]

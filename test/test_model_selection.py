@@ -7,7 +7,7 @@ import pytest
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core import camera as cam
 from tof_calib_ros.core import depth_bias, model_choice, pipeline
-from tof_calib_ros.sim import bound
+from tof_calib_ros.sim import bound, scenes
 
 BOARD = Board(11, 11, 0.05)
 F = 284.4
@@ -501,22 +501,14 @@ def test_the_wiggle_and_its_period_are_chosen_by_the_data(amplitude, n_img, n_co
             assert res.model.wiggle_period is None and evidence["gain"] < evidence["price"], (seed, evidence)
 
 
-# A pico flexx class sensor, unlike the ones the defaults were tuned on: 224x171, its own lens,
-# 80 MHz (a wiggle period of 0.47 m, a quarter of the 20 MHz one), a 10 mm offset, black squares
-# reading farther, the board 0.25-0.6 m away and its corners detected in the amplitude images.
-PICO = np.array([212.0, 212.0, 111.3, 86.6, -0.25, 0.08, 0.0, 0.0, 0.0])
+# A pico flexx class sensor, unlike the ones the defaults were tuned on (``sim.scenes.pico_flexx``).
+PICO = sim.pico_flexx_camera().params
 
 
 def _pico(seed: int) -> tuple[Board, list[View], float]:
-    board = Board(5, 7, 0.03)
-    camera = sim.SimCamera(PICO, 224, 171)
-    period = depth_bias.wiggle_period(80e6)
-    rng = np.random.default_rng(seed)
-    noise = sim.Noise(depth=0.004, offset=0.01, wiggle_amplitude=0.015, wiggle_period=period,
-                      wiggle_phase=rng.uniform(0, 2 * np.pi), amplitude=0.01, dark_offset=0.004)
-    poses = sim.random_poses(camera, board, 8, rng, distance=(0.25, 0.6), max_tilt_deg=45)
-    frames = [sim.render(camera, board, *pose, noise=noise, rng=rng, invalid=0.0) for pose in poses]
-    return board, [View(f.depth, amplitude=f.amplitude) for f in frames], period
+    frames = scenes.pico_flexx(seed)
+    return (scenes.PICO_BOARD, [View(f.depth, amplitude=f.amplitude) for f in frames],
+            depth_bias.wiggle_period(scenes.PICO_MODULATION_HZ))
 
 
 @pytest.mark.slow

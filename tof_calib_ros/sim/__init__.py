@@ -75,6 +75,11 @@ def pmd_camera() -> SimCamera:
     return SimCamera(np.array([284.4, 284.4, 100.0, 100.0, -0.1, 0.02, 0.0, 0.0, 0.0]), 200, 200)
 
 
+def pico_flexx_camera() -> SimCamera:
+    """A pmd pico flexx-like sensor (224x171, f = 212 px), with strong barrel distortion."""
+    return SimCamera(np.array([212.0, 212.0, 111.3, 86.6, -0.25, 0.08, 0.0, 0.0, 0.0]), 224, 171)
+
+
 def azure_kinect_camera() -> SimCamera:
     """An Azure Kinect NFOV-unbinned-like sensor (640x576), the large case for speed."""
     return SimCamera(np.array([504.0, 504.0, 320.0, 288.0, -0.08, 0.015, 0.0005, -0.0003, 0.0]),
