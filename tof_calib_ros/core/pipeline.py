@@ -259,9 +259,12 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
     true 0.468 in 8 of 64 simulated recordings, fx 4.7 px off, stated to that period's ±1.2; its
     folds flip between periods. Not where the corners alone leave fx less certain still: raised
     wherever the spread beat the stated sigma, near-frontal views whose sigmas were honest (97 %
-    within 2 of the truth) were widened 1.6-2.4x; so, their trust fell from 43 to 34 %."""
+    within 2 of the truth) were widened 1.6-2.4x; so, their trust fell from 43 to 34 %. Not where
+    the verdict refuses the result already: the folds could only add to its reasons, at five
+    calibrations' cost (a wide lens told a square size 10 % too large chooses a period, and is
+    refused for the square size)."""
     if options.depth_bias != "auto" or options.modulation_hz is not None or result.model.wiggle_period is None \
-            or result.corner_focal is None:
+            or result.corner_focal is None or not result.ok:
         return result
     used = [v.index for v in result.views]
     folds = bundle.jackknife_folds(len(used), CALIBRATION_FOLDS)
