@@ -80,6 +80,8 @@ MIN_SIZED_VIEWS = 2  # one view's squares size (distance + offset) / focal lengt
 # folds of the views the whole calibration is re-run on where the data chose a wiggle's period,
 # the period chosen again in each (``_over_calibrations``)
 CALIBRATION_FOLDS = 5
+# what views no check foresaw raise (OpenCV asserting on a degenerate set, a singular system)
+NUMERIC_FAILURES = (cv2.error, np.linalg.LinAlgError, FloatingPointError, ValueError)
 
 
 def _spread_deg(normals: np.ndarray) -> float:
@@ -224,9 +226,7 @@ def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] |
         return _over_calibrations(result, views, board, options, progress)
     except CalibrationError:   # a ValueError too, and already the caller's
         raise
-    except (cv2.error, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
-        # views no check above foresaw (OpenCV asserting on a degenerate set, a singular system):
-        # the caller gets a CalibrationError, as for every other refusal
+    except NUMERIC_FAILURES as exc:   # the caller gets a CalibrationError, as for every other refusal
         raise CalibrationError(f"the views cannot be calibrated: {type(exc).__name__}: "
                                f"{' '.join(str(exc).split())[:200]}") from exc
 
@@ -258,8 +258,9 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
     which no fit at one period can show: a pico flexx class sensor's search took 0.364 m for the
     true 0.468 in 8 of 64 simulated recordings, fx 4.7 px off, stated to that period's ±1.2; its
     folds flip between periods. Not where the corners alone leave fx less certain still: raised
-    wherever the spread beat the stated sigma, near-frontal views whose sigmas were honest (97 %
-    within 2 of the truth) were widened 1.6-2.4x; so, their trust fell from 43 to 34 %. Not where
+    wherever the spread beat the stated sigma, near-frontal views whose sigmas were already honest
+    (97 % within 2 of the truth) were widened 1.6-2.4x; even so, their trust fell from 43 to 34 %
+    (paper_table's tof+wiggle, 4 trials a cell, docs/measurements.md). Not where
     the verdict refuses the result already: the folds could only add to its reasons, at five
     calibrations' cost (a wide lens told a square size 10 % too large chooses a period, and is
     refused for the square size)."""
@@ -274,7 +275,7 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
             progress(f"the wiggle's period chosen again without fold {k + 1} of {len(folds)} of the views")
         try:
             again = _calibrate_with_loss([views[used[i]] for i in keep], board, result.image_size, options, None)
-        except (CalibrationError, cv2.error, np.linalg.LinAlgError, FloatingPointError, ValueError):
+        except NUMERIC_FAILURES:   # a CalibrationError too
             continue   # a fold the views cannot calibrate says nothing of the period's choice
         focal.append((again.K[0, 0], again.K[1, 1]))
     if len(focal) < 3:
