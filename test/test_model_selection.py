@@ -7,6 +7,7 @@ import pytest
 from tof_calib_ros import Board, View, calibrate, sim
 from tof_calib_ros.core import camera as cam
 from tof_calib_ros.core import depth_bias, model_choice, pipeline
+from tof_calib_ros.core.result import MAX_FOCAL_REL_STD
 from tof_calib_ros.sim import bound, scenes
 
 BOARD = Board(11, 11, 0.05)
@@ -515,7 +516,10 @@ def _pico(seed: int) -> tuple[Board, list[View], float]:
 def test_a_short_wiggle_of_a_low_resolution_sensor_is_found_from_its_amplitude_images():
     """The wiggle is found at a period within a candidate step (0.46 or 0.58 m in all of seeds
     1-16) and fx is within 1 % (0.99 % at worst over seeds 1-16); at most one of three seeds lies
-    beyond 2 stated sigmas (a normal error does so 5 % of the time), none beyond 3."""
+    beyond 2 stated sigmas (a normal error does so 5 % of the time), none beyond 3. Each is
+    trusted, but where the corners alone leave fx beyond the verdict's 1 % too: seed 3's folds
+    of the views choose periods that spread fx +- 3.6 px, where the corners alone say +- 2.9, and
+    it is refused as poorly constrained (0.33 px off)."""
     z = []
     for seed in range(1, 4):
         board, views, period = _pico(seed)
@@ -523,28 +527,21 @@ def test_a_short_wiggle_of_a_low_resolution_sensor_is_found_from_its_amplitude_i
         assert "wiggle" in res.model.depth_bias.split("+"), (seed, res.model.reasons)
         assert period / 1.3 < res.model.wiggle_period < period * 1.3, (seed, res.model.wiggle_period)
         error = res.K[0, 0] - PICO[0]
-        assert res.ok and abs(error) < 0.01 * PICO[0], (seed, res.K[0, 0], res.verdict)
+        assert abs(error) < 0.01 * PICO[0], (seed, res.K[0, 0])
+        assert res.ok or res.corner_focal[2] > MAX_FOCAL_REL_STD * PICO[0], (seed, res.verdict, res.corner_focal)
         z.append(error / res.std["fx"])
     assert np.sum(np.abs(z) > 2) <= 1 and np.max(np.abs(z)) < 3, np.round(z, 2)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured 2026-12-02: 13 of 16 seeds within 2 stated sigmas, one trusted "
-                                       "4.0 sigmas (0.7 %) off; the paper_table rows' 94-99 % do not carry over")
 def test_a_short_wiggle_of_a_low_resolution_sensor_states_honest_sigmas():
     """The issue's sigma honesty (the true fx within 2 stated sigmas in 90 % of trials) on the
     pico flexx class sensor, whose corners are detected (0.17 px RMS off their true places) and
-    whose wiggle is short: not met. The errors lean one way (fx low in 12 of 16) and the depth's model claims up to 3
-    times OpenCV's precision there. The true corners put fx 0.02 px RMS off; the same corners with iid
-    noise as large as the detector's error on the clipped views (0.12 px) put it 1.43 px RMS off, one
-    seed 7.6 sigmas. Seed 16 over ten such draws: fx -1.82 px on average, stated +- 0.46; -0.49 with
-    no wiggle in the scene, and -0.97 with the period given and neither depth noise nor a dark
-    offset: the corner depths made from noisy corners on a wiggling sensor are off in a way the
-    fit does not state (docs/measurements.md, 2026-12-01 and 2026-12-02).
-    Weighing the wiggle's periods by their refits' deviances in
-    fx's uncertainty (not the score test's gains) mended a 5-sigma case with the corners' true
-    positions, but on paper_table's near-frontal wiggling rows put 91 % within 2 sigmas (95 %
-    before) and trusted 31 % (48 %): not kept."""
+    whose wiggle is short. The search's period is not settled on such views: it took 0.364 m for
+    the true 0.468 in 8 of 64 seeds, fx 4.7 px off, stated to that period's +- 1.2 px. The whole
+    calibration re-run on folds of the views, the period chosen again, states that (15 of these 16
+    seeds within 2 sigmas, none trusted beyond 3; 13 of 16 before, one trusted 4.0 sigmas off);
+    ``benchmarks/pico_honesty.py`` gives 64 seeds."""
     inside, trusted_far = 0, 0
     for seed in range(1, 17):
         board, views, _ = _pico(seed)
@@ -553,6 +550,23 @@ def test_a_short_wiggle_of_a_low_resolution_sensor_states_honest_sigmas():
         inside += z <= 2
         trusted_far += bool(res.ok and z > 3)
     assert inside >= 15 and trusted_far == 0, (inside, trusted_far)
+
+
+@pytest.mark.slow
+def test_a_period_the_folds_of_the_views_do_not_settle_widens_fx_and_is_not_trusted():
+    """Seed 61 of the pico flexx class sensor: the search takes a period 22 % short, fx about 5.8
+    px low, stated +- 1.2 px and trusted before. Its folds choose other periods, and the stated
+    sigma takes in their spread, which the corners alone (+- 1.4) leave it under: the truth within
+    2 sigmas, and the result not trusted. Told the modulation frequency, there is no period to
+    choose and nothing is re-run."""
+    board, views, _ = _pico(61)
+    res = calibrate(views, board)
+    error = res.K[0, 0] - PICO[0]
+    assert abs(error) > 3, error   # the case this is about: a period the search got wrong
+    assert abs(error) <= 2 * res.std["fx"] and res.std["fx"] > res.corner_focal[2], (error, res.std["fx"])
+    assert not res.ok and any("period chosen again" in r for r in res.model.reasons), res.model.reasons
+    told = calibrate(views, board, modulation_hz=scenes.PICO_MODULATION_HZ)
+    assert not any("period chosen again" in r for r in told.model.reasons), told.model.reasons
 
 
 def test_a_near_frontal_wiggle_is_exact_on_noiseless_views():
