@@ -557,16 +557,19 @@ def test_a_period_the_folds_of_the_views_do_not_settle_widens_fx_and_is_not_trus
     """Seed 61 of the pico flexx class sensor: the search takes a period 22 % short, fx about 5.8
     px low, stated +- 1.2 px and trusted before. Its folds choose other periods, and the stated
     sigma takes in their spread, which the corners alone (+- 1.4) leave it under: the truth within
-    2 sigmas, and the result not trusted. Told the modulation frequency, there is no period to
-    choose and nothing is re-run."""
+    2 sigmas, and the result not trusted, the verdict asking for the modulation frequency. Told it,
+    there is no period to choose and nothing is re-run."""
     board, views, _ = _pico(61)
     res = calibrate(views, board)
     error = res.K[0, 0] - PICO[0]
     assert abs(error) > 3, error   # the case this is about: a period the search got wrong
     assert abs(error) <= 2 * res.std["fx"] and res.std["fx"] > res.corner_focal[2], (error, res.std["fx"])
     assert not res.ok and any("period chosen again" in r for r in res.model.reasons), res.model.reasons
+    assert res.model.period_spread["fx"] == res.std["fx"], res.model.period_spread
+    assert any("fx is poorly constrained" in r and "modulation frequency" in r for r in res.verdict), res.verdict
     told = calibrate(views, board, modulation_hz=scenes.PICO_MODULATION_HZ)
     assert not any("period chosen again" in r for r in told.model.reasons), told.model.reasons
+    assert not told.model.period_spread
 
 
 def test_a_near_frontal_wiggle_is_exact_on_noiseless_views():

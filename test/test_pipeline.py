@@ -217,6 +217,21 @@ def test_verdict_names_what_is_poorly_constrained():
     assert res.to_dict()["verdict"]["ok"] is False
 
 
+def test_a_focal_length_the_wiggles_period_leaves_open_asks_for_the_modulation_frequency():
+    """Where the folds of the views, choosing the wiggle's period again, set fx's uncertainty, the
+    verdict says what would settle it; where the views alone leave it open, it asks for views."""
+    views, _ = _scene(4, 9, noise=sim.Noise(depth=0.003))
+    res = calibrate(views, BOARD)
+    assert res.ok and not res.model.period_spread
+    res.std["fx"] = 0.05 * res.K[0, 0]
+    assert [r for r in res.verdict if r.startswith("fx")] == [
+        f"fx is poorly constrained (std {res.std['fx']:.3g} px): add views at other distances and tilts"]
+    res.model.period_spread["fx"] = res.std["fx"]
+    (reason,) = [r for r in res.verdict if r.startswith("fx")]
+    assert "modulation frequency" in reason and "--modulation-mhz" in reason and "modulation_hz" in reason
+    assert res.to_dict()["model"]["period_spread"] == {"fx": res.std["fx"]}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("square, depth_factor", [
     (0.08, 1.0),   # the square given twice its size

@@ -110,8 +110,11 @@ class Model:
     ``depth_inflation``: how many times its noise the depth's error was taken to be, where the
     depth at its full weight pulled the corners off their fit (1: its noise).
     ``wiggle_period``: the period (m) of the depth model's wiggle, where it has one: from the
-    modulation frequency given, or the one the data chose. ``depth_convention``: the depth's, as
-    given or as the boards' flatness chose (core.depth_convention)."""
+    modulation frequency given, or the one the data chose. ``period_spread``: fx's and fy's spread
+    (px) over calibrations without each fold of the views, each choosing the wiggle's period
+    again, where it raised their uncertainty (the views do not settle the period the data chose).
+    ``depth_convention``: the depth's, as given or as the boards' flatness chose
+    (core.depth_convention)."""
 
     distortion: str = "none"
     depth_bias: str = "none"
@@ -121,6 +124,7 @@ class Model:
     dropped_corners: dict[int, list[int]] = field(default_factory=dict)
     depth_inflation: float = 1.0
     wiggle_period: float | None = None
+    period_spread: dict[str, float] = field(default_factory=dict)
     depth_convention: str = "z"
 
     def to_dict(self) -> dict:

@@ -287,6 +287,7 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
         return result
     for name, s, _ in grown:
         result.std[name] = float(s)
+        result.model.period_spread[name] = float(s)
     why = (f"calibrated again without each of {len(folds)} folds of the views, the wiggle's period chosen again "
            "in each, "
            + ", ".join(f"{name} spreads ±{s:.2f} px, more than the corners alone leave it (±{alone:.2f})"

@@ -22,6 +22,11 @@ MAX_PIXEL_RMS = 1.0          # px
 MAX_DEPTH_RMS = 0.02         # m, after the bias correction
 MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
 MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
+# where calibrations without each fold of the views chose other wiggle periods and that spread is
+# the uncertainty (``Model.period_spread``): the frequency makes the period known, and nothing is chosen
+PERIOD_UNSETTLED = ("the views do not settle the wiggle's period the data chose (calibrated without each fold of "
+                    "them, it spreads as far): give the camera's modulation frequency (the node's "
+                    "depth.modulation_mhz, tof_calib's --modulation-mhz, modulation_hz in Python), or ")
 # The corners alone (Zhang) fix the focal lengths whatever the square size and the depth's units;
 # the depth-aided ones scale with both. They disagree when they are further apart than 5 of the
 # standard deviations of their difference (a square 18 % off was let through by a fixed 25 %
@@ -197,7 +202,9 @@ class CalibrationResult:
         for name, f in (("fx", self.K[0, 0]), ("fy", self.K[1, 1])):
             s = self.std.get(name, float("nan"))
             if not np.isfinite(s) or s > MAX_FOCAL_REL_STD * f:
-                reasons.append(f"{name} is poorly constrained (std {s:.3g} px): add views at other distances and tilts")
+                reasons.append(f"{name} is poorly constrained (std {s:.3g} px): "
+                               + (PERIOD_UNSETTLED if name in self.model.period_spread else "")
+                               + "add views at other distances and tilts")
         for name, size in (("cx", self.image_size[0]), ("cy", self.image_size[1])):
             s = self.std.get(name, float("nan"))
             if not np.isfinite(s) or s > MAX_CENTER_REL_STD * size:
