@@ -112,7 +112,8 @@ class Model:
     ``wiggle_period``: the period (m) of the depth model's wiggle, where it has one: from the
     modulation frequency given, or the one the data chose. ``period_spread``: fx's and fy's spread
     (px) over calibrations without each fold of the views, each choosing the wiggle's period
-    again, where it raised their uncertainty (the views do not settle the period the data chose).
+    again, where it raised their uncertainty (the re-runs' spread as a whole: the folds need not
+    choose other periods).
     ``depth_convention``: the depth's, as given or as the boards' flatness chose
     (core.depth_convention)."""
 

@@ -22,8 +22,8 @@ MAX_PIXEL_RMS = 1.0          # px
 MAX_DEPTH_RMS = 0.02         # m, after the bias correction
 MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
 MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
-# where calibrations without each fold of the views chose other wiggle periods and that spread is
-# the uncertainty (``Model.period_spread``): the frequency makes the period known, and nothing is chosen
+# where calibrations re-run without each fold of the views, each choosing the wiggle's period again,
+# set the uncertainty (``Model.period_spread``): told the frequency, nothing is chosen or re-run
 PERIOD_UNSETTLED = ("the views do not settle the wiggle's period the data chose (calibrated without each fold of "
                     "them, it spreads as far): give the camera's modulation frequency (the node's "
                     "depth.modulation_mhz, tof_calib's --modulation-mhz, modulation_hz in Python), or ")
