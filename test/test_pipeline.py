@@ -219,7 +219,8 @@ def test_verdict_names_what_is_poorly_constrained():
 
 def test_a_focal_length_the_wiggles_period_leaves_open_asks_for_the_modulation_frequency():
     """Where the folds of the views, choosing the wiggle's period again, set fx's uncertainty, the
-    verdict says what would settle it; where the views alone leave it open, it asks for views."""
+    verdict says what would settle it, and blames the period only where the folds chose other
+    ones; where the views alone leave it open, it asks for views."""
     views, _ = _scene(4, 9, noise=sim.Noise(depth=0.003))
     res = calibrate(views, BOARD)
     assert res.ok and not res.model.period_spread
@@ -227,9 +228,17 @@ def test_a_focal_length_the_wiggles_period_leaves_open_asks_for_the_modulation_f
     assert [r for r in res.verdict if r.startswith("fx")] == [
         f"fx is poorly constrained (std {res.std['fx']:.3g} px): add views at other distances and tilts"]
     res.model.period_spread["fx"] = res.std["fx"]
+    res.model.wiggle_period = 0.459
+    res.model.fold_periods = [0.459, 0.364, 0.459, None, 0.459]   # the folds chose other periods
     (reason,) = [r for r in res.verdict if r.startswith("fx")]
     assert "modulation frequency" in reason and "--modulation-mhz" in reason and "modulation_hz" in reason
+    assert "do not settle the wiggle's period" in reason and "folds chose other periods" in reason, reason
     assert res.to_dict()["model"]["period_spread"] == {"fx": res.std["fx"]}
+    assert res.to_dict()["model"]["fold_periods"] == [0.459, 0.364, 0.459, None, 0.459]
+    res.model.fold_periods = [0.459] * 5   # each chose the data's: the spread is the views', not the period's
+    (reason,) = [r for r in res.verdict if r.startswith("fx")]
+    assert "modulation frequency" in reason and "every fold choosing the period all of them chose" in reason, reason
+    assert "do not settle" not in reason and reason.endswith("add views at other distances and tilts"), reason
 
 
 @pytest.mark.slow

@@ -110,10 +110,11 @@ class Model:
     ``depth_inflation``: how many times its noise the depth's error was taken to be, where the
     depth at its full weight pulled the corners off their fit (1: its noise).
     ``wiggle_period``: the period (m) of the depth model's wiggle, where it has one: from the
-    modulation frequency given, or the one the data chose. ``period_spread``: fx's and fy's spread
-    (px) over calibrations without each fold of the views, each choosing the wiggle's period
-    again, where it raised their uncertainty (the re-runs' spread as a whole: the folds need not
-    choose other periods).
+    modulation frequency given, or the one the data chose. ``fold_periods``: where the data chose
+    it, the period (m, None for no wiggle) that calibrations without each fold of the views chose
+    again; ``period_spread``: fx's and fy's spread (px) over those calibrations, where it raised
+    their uncertainty (the re-runs' spread as a whole: the folds need not choose other periods,
+    ``settled_period`` says whether they did).
     ``depth_convention``: the depth's, as given or as the boards' flatness chose
     (core.depth_convention)."""
 
@@ -125,8 +126,14 @@ class Model:
     dropped_corners: dict[int, list[int]] = field(default_factory=dict)
     depth_inflation: float = 1.0
     wiggle_period: float | None = None
+    fold_periods: list[float | None] = field(default_factory=list)
     period_spread: dict[str, float] = field(default_factory=dict)
     depth_convention: str = "z"
+
+    @property
+    def settled_period(self) -> bool:
+        """Whether every fold of the views chose the period the whole of them did."""
+        return all(p == self.wiggle_period for p in self.fold_periods)
 
     def to_dict(self) -> dict:
         out = asdict(self)

@@ -269,7 +269,7 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
         return result
     used = [v.index for v in result.views]
     folds = bundle.jackknife_folds(len(used), CALIBRATION_FOLDS)
-    focal = []
+    focal, periods = [], []
     for k, keep in enumerate(folds):
         if progress is not None:
             progress(f"the wiggle's period chosen again without fold {k + 1} of {len(folds)} of the views")
@@ -278,21 +278,25 @@ def _over_calibrations(result: CalibrationResult, views: Sequence[View], board: 
         except NUMERIC_FAILURES:   # a CalibrationError too
             continue   # a fold the views cannot calibrate says nothing of the period's choice
         focal.append((again.K[0, 0], again.K[1, 1]))
+        periods.append(again.model.wiggle_period)
     if len(focal) < 3:
         return result
+    result.model.fold_periods = periods
     spread = bundle.jackknife_spread(np.array(focal))
     grown = [(name, s, alone) for name, s, alone in zip(("fx", "fy"), spread, result.corner_focal[2:])
              if s > alone and s > result.std[name]]
     if not grown:
         return result
-    for name, s, _ in grown:
-        result.std[name] = float(s)
-        result.model.period_spread[name] = float(s)
+    result.model.period_spread = {name: float(s) for name, s, _ in grown}
+    result.std.update(result.model.period_spread)
+    chose = ", ".join("none" if p is None else f"{p:.3f}" for p in periods)
     why = (f"calibrated again without each of {len(folds)} folds of the views, the wiggle's period chosen again "
-           "in each, "
+           f"in each ({chose} m), "
            + ", ".join(f"{name} spreads ±{s:.2f} px, more than the corners alone leave it (±{alone:.2f})"
                        for name, s, alone in grown)
-           + ": the period these views choose is not settled; the uncertainty includes that spread")
+           + (": the period these views choose is not settled" if not result.model.settled_period else
+              ": each fold chose the same period, and still these views leave the focal length that uncertain")
+           + "; the uncertainty includes that spread")
     result.model.reasons.append(why)
     if progress is not None:
         progress(why)
