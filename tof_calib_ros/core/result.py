@@ -260,16 +260,17 @@ class CalibrationResult:
                 + ("" if self.extrapolated is None else f"; {self.extrapolated.brief()}"))
 
     def gain_brief(self) -> str:
-        """The depth's gain, for a person (with a depth_gain), and where the refits stated fx or fy less
-        certain than the corners alone do, that too: the gain is on the noise, and beside a sigma the
-        folds of the views widened (a pico flexx class sensor's: 2.6 on the noise, stated ±3.6
-        against the corners alone's ±2.9) it alone would say the depth helped."""
+        """The depth's gain, for a person (with a depth_gain), and where the refits stated fx or fy
+        beyond the corners alone's sigma on their noise, both: the gain is on the noise, and beside
+        a sigma the refits widened (a pico flexx class sensor's folds: 3.8 on the noise, stated
+        ±3.6 against the corners alone's ±2.9) it alone would read as the depth's help. The corners
+        alone are not refitted, so this says what was stated, not which is the more certain."""
         g = self.depth_gain
-        wider = [f"{name} ±{self.std[name]:.2f} against ±{alone:.2f} px"
+        wider = [f"{name} ±{self.std[name]:.2f} px (the corners alone ±{alone:.2f})"
                  for name, alone in zip(("fx", "fy"), self.corner_focal[2:]) if self.std[name] > alone]
         return (f"the depth made fx {g['fx']:.3g} and fy {g['fy']:.3g} times as certain as the corners alone "
                 f"({self.corner_lens}, on the noise of each)"
-                + (f", but with the refits less certain than the corners alone: {', '.join(wider)}" if wider else ""))
+                + (f"; stated with the refits, {' and '.join(wider)}" if wider else ""))
 
     def to_dict(self) -> dict:
         """Everything the result holds, as plain JSON-ready types."""
