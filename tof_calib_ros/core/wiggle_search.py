@@ -47,7 +47,9 @@ class WiggleSearch:
     against the wiggle's ``price``, the views as each period has them (``views_at``) and as the fit
     without a wiggle had them (``plain``), and where a wiggle was taken, the period of ``hz`` and
     the fit with it (``refit``), which has a radial offset instead where ``radial``. In z-depth,
-    ``radial_gain`` is the radial offset's gain, taken or not."""
+    ``radial_gain`` is the radial offset's gain, taken or not. ``at_end``: the end of the periods
+    looked for (0 the longest, the last the shortest) where the largest gain lies beyond the
+    price: an error no wiggle looked for explains."""
     evidence: dict[str, float]
     reason: str
     gains: np.ndarray
@@ -58,6 +60,7 @@ class WiggleSearch:
     refit: Fitted | None = None
     radial: bool = False
     radial_gain: float | None = None
+    at_end: int | None = None
 
 
 def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.State,
@@ -105,6 +108,8 @@ def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.
                                 f"a wiggle's at most {gains[k]:.1f} against {price:.1f}")
                 say(found.reason)
                 return found
+    if gains[k] > price and k in (0, len(gains) - 1):
+        found.at_end = k
     if gains[k] <= price or k in (0, len(gains) - 1):
         found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
                         + (f"below its price, {price:.1f}" if gains[k] <= price else
