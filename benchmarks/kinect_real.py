@@ -12,6 +12,8 @@
    pose found by solvePnP with the calibration under test), how often it is trusted, and how
    often it is trusted with ours' all-view fx (the best there is; no truth here) beyond 2 of
    its stated sigmas.
+4. Runs of consecutive views (8, 12, 16 and 24, every 4th start; full resolution): how often
+   each is trusted with fx or fy beyond 2 and 3 stated sigmas of ours' all-view result.
 At full resolution (512x424) and downsampled by 0.4 (205x170, PMD class). With
 ``--modulation-mhz``, ours is also run told each frequency (``modulation_hz``), as a user who
 gives one of the camera's frequencies would: the Kinect v2 unwraps three (about 16, 80 and
@@ -21,7 +23,8 @@ with the depth read in those units (``depth_units``, metres a count), as a user 
 depth's scale from an earlier calibration would: what the few views lose to a depth scale the
 data must find.
 
-    python benchmarks/kinect_real.py [--draws 20] [--data DIR] [--modulation-mhz 80 16] [--depth-units 0.001019]
+    python benchmarks/kinect_real.py [--draws 20] [--windows 8 12 16 24] [--data DIR] [--modulation-mhz 80 16]
+                                     [--depth-units 0.001019]
 """
 from __future__ import annotations
 
@@ -235,6 +238,36 @@ def few_view(views: list[View], draws: int, jobs: int, refs: dict[str, np.ndarra
     return rows
 
 
+def windows(views: list[View], lengths: list[int], ours_all: np.ndarray) -> list[dict]:
+    """Runs of consecutive views (every 4th start), as a user records who keeps the board in one
+    part of the image: how often each method is trusted with fx or fy beyond 2 and 3 of its
+    stated sigmas from ours' all-view result (the best there is; no truth here)."""
+    print("contiguous windows: trusted, and trusted with fx or fy beyond 2 / 3 stated sigmas of ours' all-view")
+    print(f"{'views':>5} {'windows':>7} | " + " | ".join(f"{m[:18]:>18} trusted  >2 sig  >3 sig" for m in METHODS))
+    rows = []
+    for length in lengths:
+        row = {"views": length, "windows": 0}
+        got = {m: [] for m in METHODS}
+        for start in range(0, len(views) - length + 1, 4):
+            row["windows"] += 1
+            for m, kwargs in METHODS.items():
+                try:
+                    res = calibrate(views[start:start + length], BOARD, **kwargs)
+                except CalibrationError:
+                    continue
+                z = max(abs(res.K[k, k] - ours_all[k, k]) / res.std[name] for k, name in ((0, "fx"), (1, "fy")))
+                got[m].append((res.ok, z))
+        cells = []
+        for m in METHODS:
+            trusted = [z for ok, z in got[m] if ok]
+            row[m] = {"trusted": len(trusted), "beyond_2": sum(z > 2 for z in trusted),
+                      "beyond_3": sum(z > 3 for z in trusted)}
+            cells.append(f"{'':18} {len(trusted):7d} {row[m]['beyond_2']:7d} {row[m]['beyond_3']:7d}")
+        print(f"{length:5d} {row['windows']:7d} | " + " | ".join(cells))
+        rows.append(row)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=20, help="few-view draws per view count; 0 skips them")
@@ -243,6 +276,8 @@ def main() -> None:
     ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "kinect_real.json")
     ap.add_argument("--modulation-mhz", type=float, nargs="+", default=[],
                     help="also run ours told each of these modulation frequencies")
+    ap.add_argument("--windows", type=int, nargs="*", default=[8, 12, 16, 24],
+                    help="lengths of the runs of consecutive views calibrated at full resolution; none skips them")
     ap.add_argument("--depth-units", type=float, nargs="+", default=[],
                     help="also run ours with the depth read in each of these units (m a count; the files are mm)")
     args = ap.parse_args()
@@ -250,7 +285,10 @@ def main() -> None:
     METHODS.update({f"ours, {u * 1e3:g} mm": dict(depth_units=u) for u in args.depth_units})
     if not args.data.is_dir():
         raise SystemExit(f"Kinect data not found at {args.data}")
-    full = run_scale(load(args.data, 1.0), 1.0, args.draws, args.jobs, None)
+    full_views = load(args.data, 1.0)
+    full = run_scale(full_views, 1.0, args.draws, args.jobs, None)
+    if args.windows:
+        full["windows"] = windows(full_views, args.windows, np.array(full["refs_K"]["ours"]))
     low = run_scale(load(args.data, 0.4), 0.4, args.draws, args.jobs,
                     {n: np.array(k) for n, k in full["refs_K"].items()})
     reports = [full, low]
