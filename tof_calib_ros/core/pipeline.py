@@ -697,13 +697,12 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     # error over distance that no wiggle it looked for explains; at the long end, a slope, which
     # is a scale: 16 consecutive real Kinect v2 views (gain 185 against 21 at 4.7 m) were trusted
     # 10 px (13 stated sigmas) from OpenCV's all-view fx at the depth's full weight
-    beyond = found_wiggle is not None and found_wiggle.at_end is not None
-    slope = found_wiggle is not None and found_wiggle.at_end == 0
-    unexplained = check.over_distance or (bowl is not None and not bowl[1]) or beyond
+    at_end = None if found_wiggle is None else found_wiggle.at_end
+    unexplained = check.over_distance or (bowl is not None and not bowl[1]) or at_end is not None
     # an error over distance that no wiggle searched for explains has a slope, a scale, as a bow has:
     # told an 80 MHz period, real Kinect v2 views at 205x170 were trusted 145.6 +- 0.5 px where the
     # corners alone said 148.3 and the full-resolution views, scaled, 148.0
-    bowed = bowl is not None or radial or (check.over_distance and found_wiggle is None) or slope
+    bowed = bowl is not None or radial or (check.over_distance and found_wiggle is None) or at_end == 0
     inflation = 1.0
     reason, estimates = (None, None) if refuted else why_yield(observations, fit, free, model, options, corners)
     full_weight = reason

@@ -108,9 +108,9 @@ def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.
                                 f"a wiggle's at most {gains[k]:.1f} against {price:.1f}")
                 say(found.reason)
                 return found
-    if gains[k] > price and k in (0, len(gains) - 1):
-        found.at_end = k
     if gains[k] <= price or k in (0, len(gains) - 1):
+        if gains[k] > price:
+            found.at_end = k
         found.reason = (f"no wiggle in the depth: its largest gain, {gains[k]:.1f} (at {hz / 1e6:.0f} MHz), is "
                         + (f"below its price, {price:.1f}" if gains[k] <= price else
                            "at the end of the periods looked for (an error, but not a wiggle of such a period)"))
