@@ -139,9 +139,13 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
     spinner.node.create_subscription(CameraInfo, f"{NS}/calibration_node/camera_info", on_info, latched)
     amplitude_pub = spinner.node.create_publisher(Image, f"{NS}/amplitude", qos_profile_sensor_data)
     depth_pub = spinner.node.create_publisher(Image, f"{NS}/depth", qos_profile_sensor_data)
-    clients = {s: spinner.client(Trigger, f"{NS}/calibration_node/{s}") for s in calls}
-    # a burst comes from three more clients, each with room for its 100 answers
+    # Every client of a service receives every answer the service sends and drops the others'
+    # (ros2/rmw_fastrtps#559, ros2/rclcpp#2397), keeping the last 10 by default: the 300 answers of
+    # a burst from three more clients can push one of the calibrate client's own out of its queue
+    # (one call of 676 went unanswered on a loaded machine, 2026-12-06). Each has room for them all.
     deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    clients = {s: spinner.node.create_client(Trigger, f"{NS}/calibration_node/{s}", qos_profile=deep)
+               for s in calls}
     burst_clients = [spinner.node.create_client(Trigger, f"{NS}/calibration_node/calibrate", qos_profile=deep)
                      for _ in range(3)]
     events = {"burst of 300 calls sent": False, "calibration worker stopped (SIGSTOP)": False}
@@ -154,8 +158,8 @@ def soak(minutes: float, seed: int = 0, log=print) -> dict:
         # the launcher execs Python, so the pid is the node's own process
         wait_until(lambda: amplitude_pub.get_subscription_count() > 0, 30.0, "the node's subscriptions", *procs)
 
-        for client in burst_clients:   # answered once each first, as above
-            wait_until(lambda c=client: is_answered(c, 5.0), 60.0, "a burst client's first answer", *procs)
+        for client in [*clients.values(), *burst_clients]:   # answered once each first, as above
+            wait_until(lambda c=client: is_answered(c, 5.0), 60.0, "a client's first answer", *procs)
 
         def call(service: str, client=None) -> threading.Event:
             """Send one call; the returned event is set when it is answered and checked."""
