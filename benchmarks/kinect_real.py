@@ -275,7 +275,7 @@ def windows(views: list[View], lengths: list[int], ours_all: np.ndarray, ours_st
                       "beyond_3": sum(own > 3 for own, _ in trusted),
                       "difference_beyond_2": sum(diff > 2 for _, diff in trusted),
                       "difference_beyond_3": sum(diff > 3 for _, diff in trusted)}
-            cells.append(f"{'':18} " + " ".join(f"{v:7d}" for k, v in row[m].items()))
+            cells.append(f"{'':18} " + " ".join(f"{v:7d}" for v in row[m].values()))
         print(f"{length:5d} {row['windows']:7d} | " + " | ".join(cells))
         rows.append(row)
     return rows
