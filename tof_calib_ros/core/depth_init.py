@@ -52,8 +52,8 @@ def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, d
                           estimate_offset: bool) -> np.ndarray:
     """Relative square-size errors over all views at once (corners stacked, pair indices global)."""
     intr = base.copy()
-    intr[:2] = k[:2]
-    offset = k[2] if estimate_offset else 0.0
+    intr[:4] = k[:4]
+    offset = k[4] if estimate_offset else 0.0
     i, j, L = pairs
     X = points_from_depth(rays(pixels, intr), depth - offset, convention)
     res = (np.linalg.norm(X[i] - X[j], axis=1) - L) / L
@@ -65,11 +65,7 @@ def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, d
 def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: list[np.ndarray],
                       object_points: list[np.ndarray], convention: str,
                       estimate_offset: bool) -> tuple[np.ndarray, float, float]:
-    """fx and fy (and a depth offset) that make every square its true size, the principal point
-    and distortion held. A square's size barely depends on the principal point where the board
-    faces the camera, so its fit moved it by whatever the lens held at none left unexplained:
-    near frontal, a strong barrel (k1 -0.3) took cx 122 px off, and the joint fit started there
-    ran off (fx 648). The joint fit estimates it with the lens.
+    """fx, fy, cx, cy (and a depth offset) that make every square its true size, distortion held.
 
     Returns the intrinsics, the depth offset, and the RMS relative square-size error."""
     starts = np.cumsum([0] + [len(p) for p in pixels])
@@ -77,13 +73,13 @@ def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: l
     stacked = (np.concatenate([i + s for (i, _, _), s in zip(pairs, starts)]),
                np.concatenate([j + s for (_, j, _), s in zip(pairs, starts)]),
                np.concatenate([L for (_, _, L) in pairs]))
-    k0 = np.r_[intrinsics[:2], 0.0] if estimate_offset else intrinsics[:2].copy()
+    k0 = np.r_[intrinsics[:4], 0.0] if estimate_offset else intrinsics[:4].copy()
     sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac", max_nfev=MAX_EVALUATIONS,
                         args=(intrinsics, np.concatenate(pixels), np.concatenate(depth), stacked, convention,
                               estimate_offset))
     out = intrinsics.copy()
-    out[:2] = sol.x[:2]
-    offset = float(sol.x[2]) if estimate_offset else 0.0
+    out[:4] = sol.x[:4]
+    offset = float(sol.x[4]) if estimate_offset else 0.0
     return out, offset, float(np.sqrt(np.mean(sol.fun ** 2)))
 
 

@@ -489,10 +489,9 @@ def _squares(moved: float) -> str:
 def _sized_intrinsics(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray],
                       guesses: list[np.ndarray], options: CalibrationOptions, say: Callable[[str], None]
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """K (and the depth offset) from the squares' true size: the focal lengths, the principal point
-    that of whichever guess (OpenCV's, or the depth's at the image centre) sizes the squares
-    better; distortion starts at none (OpenCV's, from few corners, can be wild) unless it was
-    asked for."""
+    """K (and the depth offset) from the squares' true size, started from whichever guess
+    (OpenCV's or the depth's) sizes the squares better; distortion starts at none (OpenCV's, from
+    few corners, can be wild) unless it was asked for."""
     convention = options.depth_convention
     estimate_offset = options.depth_bias == "auto" or 0 in bias_model.parse(options.depth_bias)
     kept = [0, 1, 2, 3] + DISTORTION_TERMS.get(options.distortion, [])
