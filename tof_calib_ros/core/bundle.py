@@ -125,6 +125,7 @@ class Fit:
     sigma_depth: np.ndarray
     weights: list[np.ndarray] | None    # per corner, the robust loss's weights
     wiggle_period: float | None = None  # m, the depth model's wiggling period, where it has one
+    converged: bool = True              # False where the last round's LM stopped at its iteration cap
 
     def std(self) -> dict[str, float]:
         """Every intrinsic and depth term's standard deviation by name: 0 where it was held fixed."""
@@ -408,6 +409,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         problem = Problem(views, convention, sigma_px, sigma_d, free_global, weights, wiggle_period)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
+        converged = it < max_iter
         dpix, ddep, _, _ = problem.raw(state)
         pix, dep = _split(dpix, problem.view, n), _split(ddep, problem.view, n)
         # Each view's variance, with its degrees of freedom (6 pose parameters per view).
@@ -435,7 +437,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
     dpix, ddep, _, _ = problem.raw(state)
     return Fit(state, _split(dpix, problem.view, n), _split(ddep, problem.view, n), cov,
                problem.free_global, total_it, problem_sigmas[0], problem_sigmas[1], weights,
-               wiggle_period)
+               wiggle_period, converged)
 
 
 def _covariance(problem: Problem, state: State, n_views: int) -> np.ndarray:

@@ -50,10 +50,12 @@ def focal_guess(pixels: list[np.ndarray], depth: list[np.ndarray], object_points
 def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, depth: np.ndarray,
                           pairs: tuple[np.ndarray, np.ndarray, np.ndarray], convention: str,
                           estimate_offset: bool) -> np.ndarray:
-    """Relative square-size errors over all views at once (corners stacked, pair indices global)."""
+    """Relative square-size errors over all views at once (corners stacked, pair indices global);
+    ``k`` holds the first len(k) (less the offset) of fx, fy, cx, cy, then the offset."""
     intr = base.copy()
-    intr[:4] = k[:4]
-    offset = k[4] if estimate_offset else 0.0
+    n = len(k) - estimate_offset
+    intr[:n] = k[:n]
+    offset = k[n] if estimate_offset else 0.0
     i, j, L = pairs
     X = points_from_depth(rays(pixels, intr), depth - offset, convention)
     res = (np.linalg.norm(X[i] - X[j], axis=1) - L) / L
@@ -64,8 +66,10 @@ def square_size_residuals(k: np.ndarray, base: np.ndarray, pixels: np.ndarray, d
 
 def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: list[np.ndarray],
                       object_points: list[np.ndarray], convention: str,
-                      estimate_offset: bool) -> tuple[np.ndarray, float, float]:
-    """fx, fy, cx, cy (and a depth offset) that make every square its true size, distortion held.
+                      estimate_offset: bool, hold_principal_point: bool = False
+                      ) -> tuple[np.ndarray, float, float]:
+    """fx, fy, cx, cy (and a depth offset) that make every square its true size, distortion held;
+    the principal point held too where asked: near frontal a square's size barely depends on it.
 
     Returns the intrinsics, the depth offset, and the RMS relative square-size error."""
     starts = np.cumsum([0] + [len(p) for p in pixels])
@@ -73,13 +77,14 @@ def update_intrinsics(intrinsics: np.ndarray, pixels: list[np.ndarray], depth: l
     stacked = (np.concatenate([i + s for (i, _, _), s in zip(pairs, starts)]),
                np.concatenate([j + s for (_, j, _), s in zip(pairs, starts)]),
                np.concatenate([L for (_, _, L) in pairs]))
-    k0 = np.r_[intrinsics[:4], 0.0] if estimate_offset else intrinsics[:4].copy()
+    n = 2 if hold_principal_point else 4
+    k0 = np.r_[intrinsics[:n], 0.0] if estimate_offset else intrinsics[:n].copy()
     sol = least_squares(square_size_residuals, k0, method="lm", x_scale="jac", max_nfev=MAX_EVALUATIONS,
                         args=(intrinsics, np.concatenate(pixels), np.concatenate(depth), stacked, convention,
                               estimate_offset))
     out = intrinsics.copy()
-    out[:4] = sol.x[:4]
-    offset = float(sol.x[4]) if estimate_offset else 0.0
+    out[:n] = sol.x[:n]
+    offset = float(sol.x[n]) if estimate_offset else 0.0
     return out, offset, float(np.sqrt(np.mean(sol.fun ** 2)))
 
 
