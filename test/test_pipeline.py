@@ -133,7 +133,6 @@ def test_a_joint_fit_that_does_not_converge_is_started_again_with_the_principal_
         res.model.reasons
 
 
-
 def test_the_whole_board_sharpens_a_sensor_that_reads_both_colours_alike():
     # The paper's synthetic sensor: 10 mm on every pixel, no bias. Near frontal, the principal
     # point rests on the planes' tilts and the focal length on their distances: both gain

@@ -441,24 +441,25 @@ class _DepthFit:
 
 def _depth_fit(prepared: list[Prepared], board: Board, lens: np.ndarray, corner_poses: np.ndarray | None,
                obj: list[np.ndarray], guesses: list[np.ndarray], image_size: tuple[int, int],
-               options: CalibrationOptions, say: Callable[[str], None], chosen: Fitted | None = None,
-               hold_principal_point: bool = False) -> _DepthFit:
+               options: CalibrationOptions, say: Callable[[str], None], chosen: Fitted | None = None) -> _DepthFit:
     """2. the depth planarized at the corners, its samples chosen through ``lens``; 3. K from the
     squares' size; 4. the poses from the 3D corners; 5. the joint fit in the model the data call
     for (the depth's weight falls later, where it leaves the result worse than the corners alone).
     Given the fit ``chosen`` on samples chosen through another lens, its model is kept and fitted
     again from its estimate: the corners chose the lens, and a choice made again let a wrong
     square size, which the depth's new samples fit no better, fold the rational lens a wide
-    Azure Kinect lens needs (the verdict then asked for it instead of the right square size).
-    ``hold_principal_point``: K from the squares' size keeps the guesses' principal point."""
+    Azure Kinect lens needs (the verdict then asked for it instead of the right square size)."""
     notes: list[str] = []
     plane_samples, squares, convention, sampled = _plane_samples(prepared, board, lens, corner_poses, image_size[0],
                                                                  options, notes, say)
     options = replace(options, depth_convention=convention)
     if chosen is None:
-        intr, bias = _sized_intrinsics(prepared, plane_samples, obj, guesses, options, say, hold_principal_point)
-        observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
-        fitted = choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say)
+        fitted, start = _sized_fit(prepared, plane_samples, obj, guesses, options, say, False)
+        if not fitted.fit.converged:
+            (fitted, start), why = _restarted((fitted, start), _sized_fit(prepared, plane_samples, obj, guesses,
+                                                                          options, say, True))
+            sampled.append(why)
+            say(why)
     else:
         state = chosen.fit.state
         observations, start = _first_fit(prepared, plane_samples, obj, state.intrinsics, state.bias, options)
@@ -468,28 +469,38 @@ def _depth_fit(prepared: list[Prepared], board: Board, lens: np.ndarray, corner_
     return _DepthFit(plane_samples, squares, sampled, options, start, fitted, notes)
 
 
-def _restarted(free: _DepthFit, held: _DepthFit, say: Callable[[str], None]) -> _DepthFit:
+def _sized_fit(prepared: list[Prepared], plane_samples: PlaneSamples, obj: list[np.ndarray],
+               guesses: list[np.ndarray], options: CalibrationOptions, say: Callable[[str], None],
+               hold_principal_point: bool) -> tuple[Fitted, bundle.State]:
+    """Steps 3-5 from K from the squares' size (its principal point the guesses' where held):
+    the joint fit in the model the data call for, and the state the model's choice started from."""
+    intr, bias = _sized_intrinsics(prepared, plane_samples, obj, guesses, options, say, hold_principal_point)
+    observations, start = _first_fit(prepared, plane_samples, obj, intr, bias, options)
+    return choose_and_fit(prepared, plane_samples, obj, observations, start, False, options, say), start
+
+
+def _restarted(free: tuple[Fitted, bundle.State], held: tuple[Fitted, bundle.State]
+               ) -> tuple[tuple[Fitted, bundle.State], str]:
     """Of the joint fit started where the squares' size put the principal point (``free``, which
     did not converge) and the one started with it held at the guesses' (``held``), the one the
-    data prefer by the information criterion the model was chosen by. Near frontal a square's
-    size barely depends on the principal point, and a strong barrel the square-size fit cannot
-    follow (k1 -0.3) moved it 122 px: the joint fit from there crept off for 1,800 iterations (fx
-    648 for 284), and the samples chosen through its lens found no board. Not every time: a wide
-    lens's start that OpenCV's plumb_bob put off needs the principal point the squares move."""
-    def criterion(d: _DepthFit) -> float:
-        f = d.fitted
+    data prefer by the information criterion the model was chosen by, and why. Near frontal a
+    square's size barely depends on the principal point, and a strong barrel the square-size fit
+    cannot follow (k1 -0.3) moved it 122 px: the joint fit from there crept off for 1,800
+    iterations (fx 648 for 284), and the samples chosen through its lens found no board. Not
+    every time: a wide lens's start that OpenCV's plumb_bob put off needs the principal point the
+    squares move."""
+    def criterion(f: Fitted) -> float:
         return bundle.deviance(f.observations, f.fit) + np.log(bundle.n_observations(f.observations)) * len(f.free)
 
-    kept = min((free, held), key=criterion)
-    fx = [d.fitted.fit.state.intrinsics[0] for d in (free, held)]
-    kept.sampled.append(
+    kept = min((free, held), key=lambda pair: criterion(pair[0]))
+    other = held if kept is free else free
+    fx = [pair[0].fit.state.intrinsics[0] for pair in (free, held)]
+    return kept, (
         f"the joint fit started where the squares' size put the principal point did not converge (fx {fx[0]:.2f}); "
         f"started again with it held at the guess's (OpenCV's, or the image centre), it "
-        f"{'did' if held.fitted.fit.converged else 'did not'}"
+        f"{'did' if held[0].fit.converged else 'did not'}"
         f" (fx {fx[1]:.2f}); kept the {'first' if kept is free else 'second'}, whose information criterion is "
-        f"{criterion(kept) - criterion(held if kept is free else free):+.1f} against the other's")
-    say(kept.sampled[-1])
-    return kept
+        f"{criterion(kept[0]) - criterion(other[0]):+.1f} against the other's")
 
 
 def _squares_moved(prepared: list[Prepared], board: Board, first: np.ndarray, lens: np.ndarray) -> str | None:
@@ -659,9 +670,6 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
     first, corner_poses = (guess, None) if trad is None else (trad.intrinsics, trad.poses)
     guesses = [guess] if trad is None else [trad.intrinsics, guess]
     depth_fit = _depth_fit(prepared, board, first, corner_poses, obj, guesses, image_size, options, say)
-    if not depth_fit.fitted.fit.converged:
-        depth_fit = _restarted(depth_fit, _depth_fit(prepared, board, first, corner_poses, obj, guesses, image_size,
-                                                     options, say, hold_principal_point=True), say)
     chosen_lens = depth_fit.fitted.fit.state.intrinsics
     if (moved := _squares_moved(prepared, board, first, chosen_lens)) is not None:
         say(moved)
