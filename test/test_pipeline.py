@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from tof_calib_ros import Board, CalibrationError, View, calibrate, sim
+from tof_calib_ros.core import bundle
+from tof_calib_ros.core.result import NOT_CONVERGED
 from tof_calib_ros.core.traditional import calibrate_opencv
 
 BOARD = Board(8, 6, 0.04)
@@ -241,6 +243,26 @@ def test_verdict_names_what_is_poorly_constrained():
     assert "cx is poorly constrained" in reasons and "pixel RMS" in reasons
     assert not res.ok
     assert res.to_dict()["verdict"]["ok"] is False
+
+
+def test_a_joint_fit_stopped_at_its_iteration_cap_is_not_trusted(monkeypatch):
+    """The same views, their joint fits cut short at a few iterations and counted as having met
+    the cap: the result says it did not converge and is refused for that, where the full fits are
+    trusted and within 3 stated sigmas of the truth. OpenCV's baseline has no fit of ours to cap."""
+    views, _ = _scene(4, 9, noise=sim.Noise(depth=0.003))
+    settled = calibrate(views, BOARD)
+    assert settled.ok and settled.converged, settled.verdict
+    assert abs(settled.K[0, 0] - CAM.params[0]) < 3 * settled.std["fx"]
+    real = bundle.levenberg_marquardt
+
+    def cut_short(problem, state, max_iter=100, tol=1e-12):
+        return real(problem, state, min(max_iter, 4), tol)[0], max_iter
+
+    monkeypatch.setattr(bundle, "levenberg_marquardt", cut_short)
+    stopped = calibrate(views, BOARD)
+    assert not stopped.converged and NOT_CONVERGED in stopped.verdict and not stopped.ok
+    assert stopped.to_dict()["converged"] is False
+    assert calibrate(views, BOARD, method="traditional").converged
 
 
 def test_a_focal_length_the_wiggles_period_leaves_open_asks_for_the_modulation_frequency():

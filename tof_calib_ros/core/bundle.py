@@ -409,7 +409,7 @@ def solve(views: list[Observations], state: State, convention: str, free_global,
         problem = Problem(views, convention, sigma_px, sigma_d, free_global, weights, wiggle_period)
         state, it = levenberg_marquardt(problem, state, max_iter)
         total_it += it
-        converged = it < max_iter
+        converged = it < max_iter or max_iter == 0   # none asked: the state given is the fit (OpenCV's)
         dpix, ddep, _, _ = problem.raw(state)
         pix, dep = _split(dpix, problem.view, n), _split(ddep, problem.view, n)
         # Each view's variance, with its degrees of freedom (6 pose parameters per view).

@@ -199,7 +199,7 @@ def _result(options: CalibrationOptions, model: Model, board: Board, image_size,
                              fit.std(), _report(views, fit, planes), rejected, notes, corner_focal, options, model,
                              board.square, corner_noise=corner_noise, noise_std=(noise_fit or fit).std(),
                              depth_focal=depth_focal, run_intrinsics=None if runs is None else runs[:, :N_INTRINSICS],
-                             corner_lens=corner_lens)
+                             corner_lens=corner_lens, converged=fit.converged)
 
 
 def calibrate(views: Sequence[View], board: Board, image_size: tuple[int, int] | None = None,

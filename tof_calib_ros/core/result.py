@@ -22,6 +22,11 @@ MAX_PIXEL_RMS = 1.0          # px
 MAX_DEPTH_RMS = 0.02         # m, after the bias correction
 MAX_FOCAL_REL_STD = 0.01     # 1 % of the focal length
 MAX_CENTER_REL_STD = 0.02    # 2 % of the image size
+# A joint fit still moving at its iteration cap is not the data's best fit, nor is its covariance
+# what the data say of it: a run-off lens crept 1,800 iterations to fx 648 for 284.
+NOT_CONVERGED = ("the joint fit stopped at its iteration cap, still moving: the estimate is not the best fit to "
+                 "these views, nor is its uncertainty what they say; views that reach the image's edges, at more "
+                 "tilts, settle the lens")
 # where calibrations re-run without each fold of the views, each choosing the wiggle's period again,
 # set the uncertainty (``Model.period_spread``): told the frequency, nothing is chosen or re-run.
 # Where the folds chose other periods, the period is what is unsettled; where each chose the data's
@@ -142,6 +147,7 @@ class CalibrationResult:
     # the corners alone: their pixel RMS in the lens chosen and in a rational lens (px), where checked
     lens_rms: tuple[float, float] | None = None
     corner_lens: str = "plumb_bob"   # the lens the corners alone were fitted in (``corner_focal``)
+    converged: bool = True   # whether the joint fit came to rest before its iteration cap (``bundle.Fit``)
 
     @property
     def depth_convention(self) -> str:
@@ -186,6 +192,8 @@ class CalibrationResult:
         values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
+        if not self.converged:
+            reasons.append(NOT_CONVERGED)
         misfit = self.lens_misfit
         if misfit:
             chosen, rational = self.lens_rms
@@ -303,6 +311,7 @@ class CalibrationResult:
             "extrapolated": None if self.extrapolated is None else self.extrapolated._asdict(),
             "square_m": self.square,
             "square_from_depth_m": self.depth_square,
+            "converged": self.converged,
             "lens_rms_px": None if self.lens_rms is None else dict(zip(("chosen", "rational"), self.lens_rms)),
             "rejected_views": {str(k): v for k, v in self.rejected.items()},
             "views": [{
