@@ -192,8 +192,6 @@ class CalibrationResult:
         values = np.r_[self.K.ravel(), self.D, self.depth_bias]
         if not np.all(np.isfinite(values)):
             return ["the calibration has non-finite values"]
-        if not self.converged:
-            reasons.append(NOT_CONVERGED)
         misfit = self.lens_misfit
         if misfit:
             chosen, rational = self.lens_rms
@@ -209,6 +207,8 @@ class CalibrationResult:
         if s > 0 and abs(scale) > max(MAX_CORNER_DEPTH_DISAGREEMENT, REFUSE_SIGMAS * s):
             reasons.append(f"the depth reads {scale:+.1%} (±{s:.1%}) off the distances the corners and squares "
                            "give: " + self._squares_look(1 + scale))
+        if not self.converged:   # after the causes that can keep a fit moving
+            reasons.append(NOT_CONVERGED)
         if self.pixel_rms > MAX_PIXEL_RMS:
             reasons.append(f"pixel RMS {self.pixel_rms:.2f} px exceeds {MAX_PIXEL_RMS} px")
         if np.isfinite(self.depth_rms) and self.depth_rms > MAX_DEPTH_RMS:
