@@ -489,18 +489,16 @@ def _restarted(free: tuple[Fitted, bundle.State], held: tuple[Fitted, bundle.Sta
     iterations (fx 648 for 284), and the samples chosen through its lens found no board. Not
     every time: a wide lens's start that OpenCV's plumb_bob put off needs the principal point the
     squares move."""
-    def criterion(f: Fitted) -> float:
-        return bundle.deviance(f.observations, f.fit) + np.log(bundle.n_observations(f.observations)) * len(f.free)
-
-    kept = min((free, held), key=lambda pair: criterion(pair[0]))
-    other = held if kept is free else free
+    criteria = [bundle.deviance(f.observations, f.fit) + np.log(bundle.n_observations(f.observations)) * len(f.free)
+                for f, _ in (free, held)]
+    k = int(criteria[1] < criteria[0])   # the first where they tie
     fx = [pair[0].fit.state.intrinsics[0] for pair in (free, held)]
-    return kept, (
+    return (free, held)[k], (
         f"the joint fit started where the squares' size put the principal point did not converge (fx {fx[0]:.2f}); "
         f"started again with it held at the guess's (OpenCV's, or the image centre), it "
         f"{'did' if held[0].fit.converged else 'did not'}"
-        f" (fx {fx[1]:.2f}); kept the {'first' if kept is free else 'second'}, whose information criterion is "
-        f"{criterion(kept[0]) - criterion(other[0]):+.1f} against the other's")
+        f" (fx {fx[1]:.2f}); kept the {('first', 'second')[k]}, whose information criterion is "
+        f"{criteria[k] - criteria[1 - k]:+.1f} against the other's")
 
 
 def _squares_moved(prepared: list[Prepared], board: Board, first: np.ndarray, lens: np.ndarray) -> str | None:
