@@ -2,6 +2,7 @@
 the Kinect v2 folder, broken messages, every exit code, the check of a calibration."""
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -118,11 +119,21 @@ def test_one_worker_and_two_keep_the_same_views(bags, calibrated, tmp_path, caps
     np.testing.assert_allclose(one["camera_matrix"], two["camera_matrix"], rtol=1e-7)
 
 
+@pytest.fixture(scope="module")
+def kinect_folder(kinect_dir, tmp_path_factory) -> tuple[int, str, str, Path]:
+    """`tof_calib images` on the Kinect folder, run once for the three tests that read it (exit
+    code, stdout, stderr, output folder)."""
+    folder, out, err = tmp_path_factory.mktemp("kinect_folder"), io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["images", str(kinect_dir), *BOARD, "--output", str(folder)])
+    return code, out.getvalue(), err.getvalue(), folder
+
+
 @pytest.mark.slow
-def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
-    code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path)
+def test_the_kinect_folder_calibrates(kinect_folder):
+    code, out, err, folder = kinect_folder
     assert code == EXIT_OK, err
-    doc = json.loads((tmp_path / "calibration.json").read_text())
+    doc = json.loads((folder / "calibration.json").read_text())
     K = np.array(doc["camera_matrix"])
     # OpenCV over all 49 views with a board gives fx 370.45, fy 371.89 (README); the driver's own file 378
     assert K[0, 0] == pytest.approx(370.45, rel=0.005) and K[1, 1] == pytest.approx(371.89, rel=0.005)
@@ -131,7 +142,7 @@ def test_the_kinect_folder_calibrates(kinect_dir, tmp_path, capsys):
     axis = doc["depth_bias"]["depth_offset"] + doc["depth_bias"]["depth_radial"]
     assert 0.015 < axis < 0.035, doc["depth_bias"]
     assert "51 amplitude/depth pairs" in out and doc["collection"]["frames_with_board"] >= 45
-    assert (tmp_path / "calibration.yaml").is_file() and (tmp_path / "report.html").is_file()
+    assert (folder / "calibration.yaml").is_file() and (folder / "report.html").is_file()
 
 
 # -- recordings unlike the held-still ones: a board that never stops, sparse frames, low resolution --
@@ -176,7 +187,7 @@ def kinect_low_res(kinect_dir, tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
-def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_res, tmp_path, capsys):
+def test_the_kinect_folder_at_low_resolution_calibrates(kinect_folder, kinect_low_res, tmp_path, capsys):
     from tof_calib_ros.core.detection import detect
 
     found = sum(detect(cv2.imread(str(p), cv2.IMREAD_UNCHANGED), Board(5, 7, 0.03)).corners is not None
@@ -201,9 +212,9 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
                       ).read_text())
     assert one["views"] == doc["views"] and one["camera_matrix"] == doc["camera_matrix"]
     # against the full-resolution calibration of the same views, scaled (pixel centres stay at integers)
-    code, _, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "full")
-    assert code == EXIT_OK, err
-    full_doc = json.loads((tmp_path / "full" / "calibration.json").read_text())
+    full_code, _, full_err, full_folder = kinect_folder
+    assert full_code == EXIT_OK, full_err
+    full_doc = json.loads((full_folder / "calibration.json").read_text())
     full, full_std = np.array(full_doc["camera_matrix"]), full_doc["std"]
     K, s = np.array(doc["camera_matrix"]), 205 / 512
     assert K[0, 0] == pytest.approx(full[0, 0] * s, rel=0.02) and K[1, 1] == pytest.approx(full[1, 1] * s, rel=0.02)
@@ -228,24 +239,24 @@ def test_the_kinect_folder_at_low_resolution_calibrates(kinect_dir, kinect_low_r
 
 
 @pytest.mark.slow
-def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_dir, tmp_path, capsys):
+def test_every_still_is_used_and_the_saved_corners_are_kept(kinect_folder, tmp_path, capsys):
     """A folder of stills is not thinned as a stream is: every view with a whole board is used;
     the views/ written beside the calibration hold their corners, and calibrate again to the same K."""
     from tof_calib_ros import calibrate
     from tof_calib_ros.files.image_folder import load_views
 
-    code, out, err = run(capsys, "images", kinect_dir, *BOARD, "--output", tmp_path / "a")
+    code, out, err, folder = kinect_folder
     assert code == EXIT_OK, err
-    doc = json.loads((tmp_path / "a" / "calibration.json").read_text())
+    doc = json.loads((folder / "calibration.json").read_text())
     rejected = doc["collection"]["frames_with_board"] - len(doc["views"])
     assert rejected <= 1 and "too similar" not in out, out   # 0002's outer squares touch the border
-    views = load_views(tmp_path / "a" / "views")
+    views = load_views(folder / "views")
     assert len(views) == len(doc["views"]) and all(v.corners is not None for v in views)
     api = calibrate(views, Board(5, 7, 0.03), (512, 424))
     # the same numbers, to 1e-5 (the fit stops within a hundredth of a sigma; rounding in
     # the saved corners and the threaded sums move the last digits), far below any stated sigma
     np.testing.assert_allclose(api.K, doc["camera_matrix"], rtol=1e-5)
-    code, out, err = run(capsys, "images", tmp_path / "a" / "views", *BOARD, "--output", tmp_path / "b")
+    code, out, err = run(capsys, "images", folder / "views", *BOARD, "--output", tmp_path / "b")
     assert code == EXIT_OK, err
     assert f"{len(views)} with the corners saved beside them" in out
     np.testing.assert_allclose(json.loads((tmp_path / "b" / "calibration.json").read_text())["camera_matrix"],
