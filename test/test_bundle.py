@@ -94,6 +94,29 @@ def test_a_depth_scale_left_out_is_carried_as_far_as_the_data_put_it(seed):
     assert std[0.0] < 0.4 * std[0.03]
 
 
+@pytest.mark.filterwarnings("error")
+def test_a_term_the_data_cannot_place_is_left_unconstrained():
+    """Widened by a term the views cannot place at all, the fit states it unknown (an infinite
+    variance, where it read NaN) and the camera stays finite: a rational lens's k4 about no
+    distortion, where it trades exactly with k1."""
+    rng = np.random.default_rng(4)
+    obj = Board(6, 5, 0.05).object_points()
+    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    poses = _poses(rng, 8)
+    views = []
+    for pose in poses:
+        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
+        views.append(bundle.Observations(obj, project(X, truth).pixels, X[:, 2]))   # noise-free: k1 stays 0
+    state = bundle.State(truth, np.zeros(depth_bias.N_BIAS), poses)
+    k1, k4 = 4, 9
+    fit = bundle.solve(views, state, "z", [0, 1, 2, 3, k1])
+    wide = bundle.widened(views, fit, "z", k4, 5)
+    variance = np.diag(wide.covariance)
+    assert list(wide.free_global) == [0, 1, 2, 3, k1, k4] and np.isposinf(variance[-2:]).all()
+    assert np.isfinite(wide.covariance[:4, :4]).all() and (variance[:4] >= 0.99 * np.diag(fit.covariance)[:4]).all()
+    assert (np.abs(wide.state.intrinsics[:4] - truth[:4]) < 3 * variance[:4] ** 0.5).all()
+
+
 def _quiet_and_noisy(rng, poses, obj, truth, magnify=1.0):
     """Corners only: every third view quiet (0.02 px), the rest noisy (0.1 px); the quiet ones'
     pattern ``magnify``-d about the principal point, as a detector's error on the nearest boards

@@ -522,7 +522,9 @@ def widened(views: list[Observations], fit: Fit, convention: str, term: int, fol
     cov = jackknifed(loose, fold_estimates(views, loose, convention, folds, free, loss), free).covariance
     at = len(free) - 1
     shift = loose.state.globals_[term] - fit.state.globals_[term]
-    along = cov[:, at] / cov[at, at]   # how each parameter moves with the term
+    # how each parameter moves with the term; a term the data cannot place at all (infinite
+    # variance) moves nothing by it and stays unconstrained, where 0/inf and inf/inf made it NaN
+    along = np.divide(cov[:, at], cov[at, at], out=np.zeros(len(cov)), where=np.isfinite(cov[at, at]))
     cov = cov + np.outer(along, along) * max(shift ** 2 - cov[at, at], 0.0)
     return replace(fit, covariance=cov, free_global=loose.free_global)
 
