@@ -94,19 +94,30 @@ def test_a_depth_scale_left_out_is_carried_as_far_as_the_data_put_it(seed):
     assert std[0.0] < 0.4 * std[0.03]
 
 
+def _camera_and_poses(rng):
+    """A lens-free camera and 8 general views of a 6x5 board from 0.7 to 1.4 m."""
+    return np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0]), _poses(rng, 8)
+
+
+def _board_views(rng, truth, poses, sigma_px, sigma_depth):
+    """The 6x5 board's corners and their z-depth in each pose, with white noise of these sigmas."""
+    obj = Board(6, 5, 0.05).object_points()
+    views = []
+    for pose in poses:
+        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
+        views.append(bundle.Observations(obj, project(X, truth).pixels + rng.normal(0, sigma_px, (len(obj), 2)),
+                                         X[:, 2] + rng.normal(0, sigma_depth, len(obj))))
+    return views
+
+
 @pytest.mark.filterwarnings("error")
 def test_a_term_the_data_cannot_place_is_left_unconstrained():
     """Widened by a term the views cannot place at all, the fit states it unknown (an infinite
     variance, where it read NaN) and the camera stays finite: a rational lens's k4 about no
     distortion, where it trades exactly with k1."""
     rng = np.random.default_rng(4)
-    obj = Board(6, 5, 0.05).object_points()
-    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    poses = _poses(rng, 8)
-    views = []
-    for pose in poses:
-        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
-        views.append(bundle.Observations(obj, project(X, truth).pixels, X[:, 2]))   # noise-free: k1 stays 0
+    truth, poses = _camera_and_poses(rng)
+    views = _board_views(rng, truth, poses, 0.0, 0.0)   # noise-free: k1 stays 0
     state = bundle.State(truth, np.zeros(depth_bias.N_BIAS), poses)
     k1, k4 = 4, 9
     fit = bundle.solve(views, state, "z", [0, 1, 2, 3, k1])
@@ -197,14 +208,8 @@ def test_a_fold_refit_that_runs_off_is_refitted_from_the_fits_own_noise(monkeypa
     refitted from the fit's per-view noise instead of the first round's 1 px and 10 mm, and the
     better of the two kept. Refits that converge are left as they are."""
     rng = np.random.default_rng(4)
-    obj = Board(6, 5, 0.05).object_points()
-    truth = np.array([280.0, 280.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    poses = _poses(rng, 8)
-    views = []
-    for pose in poses:
-        X = transform_views(pose[None], obj, np.zeros(len(obj), dtype=int))[0]
-        views.append(bundle.Observations(obj, project(X, truth).pixels + rng.normal(0, 0.05, (len(obj), 2)),
-                                         X[:, 2] + rng.normal(0, 0.002, len(obj))))
+    truth, poses = _camera_and_poses(rng)
+    views = _board_views(rng, truth, poses, 0.05, 0.002)
     free = [0, 1, 2, 3, N_INTRINSICS]
     fit = bundle.solve(views, bundle.State(truth.copy(), np.zeros(depth_bias.N_BIAS), poses.copy()), "z", free)
     real_solve, seeded = bundle.solve, []
