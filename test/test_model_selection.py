@@ -242,13 +242,14 @@ def test_fx_sigma_weighs_the_depth_models_about_the_one_fitted(monkeypatch):
     lens = [F, F, 99.5, 99.5, -0.3, 0.1, 1e-3, 1e-3, 0]
     noise = sim.Noise(depth=0.01, wiggle_amplitude=0.015, wiggle_period=1.87, wiggle_phase=1.0)
     calibrate(_views(lens, 3, 9, seed=1, tilt=5.0, noise=noise), BOARD)
-    observations, fit, free, options, search = seen[0]
+    observations, fit, free, options, search, searched = seen[0]
     assert search.radial_gain is not None and search.refit is None, search.evidence
     assert bundle.RADIAL not in free and bundle.WIGGLE[0] not in free, free
     told = replace(search, radial=True, refit=object())
-    fitted = original(observations, fit, free, options, search).covariance
+    fitted = original(observations, fit, free, options, search, searched).covariance
     assert not np.allclose(fitted, fit.covariance)   # the other models do widen it
-    np.testing.assert_allclose(original(observations, fit, free, options, told).covariance, fitted, rtol=1e-9)
+    np.testing.assert_allclose(original(observations, fit, free, options, told, searched).covariance, fitted,
+                               rtol=1e-9)
 
 
 def _widen_at_full_weight(monkeypatch) -> None:

@@ -14,10 +14,11 @@ BOARD = Board(8, 6, 0.04)
 CAM = sim.pmd_camera()
 
 
-def _scene(n, seed, convention="z", noise=None, tilt=35.0, exact=False, distance=(0.55, 0.9)):
+def _scene(n, seed, convention="z", noise=None, tilt=35.0, exact=False, distance=(0.55, 0.9), border=sim.BORDER):
     rng = np.random.default_rng(seed)
     poses = sim.random_poses(CAM, BOARD, n, rng, distance=distance, max_tilt_deg=tilt)
-    frames = [sim.render(CAM, BOARD, r, t, convention=convention, noise=noise, rng=rng) for r, t in poses]
+    frames = [sim.render(CAM, BOARD, r, t, convention=convention, noise=noise, rng=rng, border=border)
+              for r, t in poses]
     views = [View(f.depth_true if exact else f.depth, f.corners) for f in frames]
     return views, frames
 
@@ -146,11 +147,27 @@ def test_the_whole_board_sharpens_a_sensor_that_reads_both_colours_alike():
     white = calibrate(views, BOARD, depth_bias="none", plane_squares="white")
     every = calibrate(views, BOARD, depth_bias="none")   # plane_squares="auto" finds the colours alike
     assert (white.model.plane_squares, every.model.plane_squares) == ("white", "all"), every.model.reasons
-    assert every.views[0].plane_pixels > 3 * white.views[0].plane_pixels
+    assert every.views[0].plane_pixels > 2 * white.views[0].plane_pixels   # the white border in both
     got = np.r_[every.K[0, 0], every.K[1, 1], every.K[0, 2], every.K[1, 2]]
     for k, name in enumerate(("fx", "fy", "cx", "cy")):
         assert every.std[name] < 0.95 * white.std[name], name
         assert abs(got[k] - CAM.params[k]) < 4 * every.std[name], name
+
+
+def test_the_boards_white_border_is_sampled_as_far_as_it_reaches():
+    """Near frontal, where the planes' tilts carry the principal point and their distances the
+    focal length, the samples go into the board's white border (1 square, to a square's margin
+    off its edge); a board without one is fitted on its squares alone, and states less."""
+    results = {}
+    for border, said in ((1.0, "white border reaches 0.9 squares"), (0.0, "shows no white border")):
+        views, _ = _scene(4, 9, noise=sim.Noise(depth=0.002), tilt=5, distance=(0.8, 1.1), border=border)
+        res = results[border] = calibrate(views, BOARD)
+        assert any(said in r for r in res.model.reasons), res.model.reasons
+        got = np.r_[res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]]
+        for k, name in enumerate(("fx", "fy", "cx", "cy")):
+            assert abs(got[k] - CAM.params[k]) < 3 * res.std[name], (border, name)
+    assert results[1.0].views[0].plane_pixels > 1.25 * results[0.0].views[0].plane_pixels
+    assert results[1.0].std["fx"] < 0.9 * results[0.0].std["fx"]
 
 
 @pytest.mark.parametrize("dark_offset", [0.004, 0.015])

@@ -8,6 +8,7 @@ from tof_calib_ros.core import depth_bias
 from tof_calib_ros.core.planarize import (
     SQUARE_MARGIN,
     board_samples,
+    border_reach,
     corner_depth,
     corner_depth_along,
     fit_plane_to,
@@ -165,6 +166,40 @@ def test_the_whole_board_lowers_corner_depth_error_when_both_colours_read_alike(
     # More than twice the pixels: the error falls as the stated standard error does.
     assert predicted["all"] < predicted["white"] / np.sqrt(2)
     assert 0.6 < err["all"] / predicted["all"] < 1.6, (err, predicted)
+
+
+@pytest.mark.parametrize("border", [0.0, 0.5, 1.0])
+def test_the_boards_border_is_found_as_far_as_it_reaches(border):
+    """Rings beyond the squares read the plane's depth and white as far as the board goes: the
+    border found is the rendered one less at most a few rings, and a board without one has none
+    (beyond it, the wall 3 m away)."""
+    rng = np.random.default_rng(5)
+    ids = np.arange(BOARD.n_corners)
+    for r, t in sim.random_poses(CAM, BOARD, 4, rng, distance=(0.6, 0.9), max_tilt_deg=30):
+        f = sim.render(CAM, BOARD, r, t, noise=sim.Noise(depth=0.005), rng=rng, border=border)
+        plane = fit_samples(board_samples(f.depth, f.corners, ids, BOARD, CAM.params, f.amplitude), CAM.params, "z")
+        reach = border_reach(f.depth, f.corners, ids, BOARD, CAM.params, plane, "z", f.amplitude)
+        assert border - 0.3 <= reach <= border, (reach, border)
+
+
+def test_the_boards_border_lowers_the_corner_depth_error():
+    """Samples taken into a 1-square border reach twice as far from the board's middle: the
+    plane's tilt, and so the depth at the outer corners, is known better than from the squares
+    alone, and the error stays what the plane's standard error says."""
+    err, predicted = {}, {}
+    for border in (0.0, 0.85):
+        e, p = [], []
+        for f in _frames("z", noise=0.01, seed=6):
+            ids = np.arange(BOARD.n_corners)
+            samples = board_samples(f.depth, f.corners, ids, BOARD, CAM.params, f.amplitude, border=border)
+            d, se = corner_depth(fit_samples(samples, CAM.params, "z"), f.corners, CAM.params, "z")
+            e.append(d - f.corner_depth)
+            p.append(se)
+        err[border] = np.sqrt(np.mean(np.concatenate(e) ** 2))
+        predicted[border] = np.sqrt(np.mean(np.concatenate(p) ** 2))
+    assert predicted[0.85] < 0.8 * predicted[0.0], predicted
+    assert err[0.85] < err[0.0], err
+    assert 0.6 < err[0.85] / predicted[0.85] < 1.6, (err, predicted)
 
 
 def test_flying_pixels_and_invalid_depth_do_not_bias_the_plane():

@@ -148,7 +148,7 @@ def look_for_wiggle(prepared, plane_samples, obj, fitted: Fitted, start: bundle.
 
 
 def over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free: list[int],
-                 options: CalibrationOptions, search: WiggleSearch) -> bundle.Fit:
+                 options: CalibrationOptions, search: WiggleSearch, searched: bundle.Fit) -> bundle.Fit:
     """The fit of the depth model chosen, its covariance widened by how far the fits of the others
     lie: no wiggle, a wiggle at each candidate period and, in z-depth, a radial offset, each
     weighted by its likelihood (the score test's gain less the wiggle's price, as the information
@@ -162,8 +162,10 @@ def over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free:
     weighed at the wiggle's price: at its own, the wiggles it narrowly beat weighed 1/n of it, and
     near frontal the 15 mm wiggles it was taken for left fx 4.6 % off at 2-3 stated sigmas (the
     radial offset's fx is the plain model's, with the wiggle's slope in it). A wiggle no ToF
-    camera has (beyond MAX_WIGGLE_M) is no candidate. Each is one solve from this fit, on the
-    views as the search planarized them."""
+    camera has (beyond MAX_WIGGLE_M) is no candidate. Each is one solve on the views as the
+    search planarized them, from ``searched``, the model chosen fitted on those views: each lies
+    as far from ``fit`` as from it (``fit`` has the board's border in its samples, where the
+    search has the squares alone)."""
     wiggle = bundle.WIGGLE
     base = [t for t in free if t not in (*wiggle, bundle.RADIAL)]
     # (log weight, views, terms, period): no wiggle, the radial offset, then each period
@@ -179,8 +181,8 @@ def over_wiggles(observations: list[bundle.Observations], fit: bundle.Fit, free:
     # radial offset the search took
     chosen = len(models) - len(search.gains) + int(np.argmax(search.gains)) if wiggle[0] in free \
         else 1 if bundle.RADIAL in free else 0
-    here = fit.state.globals_[fit.free_global]
-    state = fit.state.copy()
+    here = searched.state.globals_[fit.free_global]
+    state = searched.state.copy()
     state.bias[bias_model.TERMS["wiggle"] + bias_model.TERMS["radial"]] = 0.0
     inflation = observations[0].depth_inflation
     total, spread = weights[chosen], np.zeros_like(fit.covariance)
