@@ -411,11 +411,27 @@ def _bordered(prepared: list[Prepared], board: Board, plane_samples: PlaneSample
             continue
         try:
             smp = board_samples(v.depth, v.corners, v.ids, board, intr, v.amplitude, squares=drawn, border=border)
-            smp = smp if squares == "all" else smp.subset(~smp.black)
-            samples[k] = smp.subset(fit_samples(smp, intr, convention).inliers)
+            samples[k] = _plane_inliers(smp, squares, intr, convention)
         except CalibrationError:
             continue   # its squares' samples are kept
     return PlaneSamples(samples, width), why
+
+
+def _drawn_squares(options: CalibrationOptions) -> str:
+    """The squares the samples are drawn from: all of them where the squares the planes use are
+    still to be chosen (``plane_squares="auto"``)."""
+    return "all" if options.plane_squares == "auto" else options.plane_squares
+
+
+def _plane_inliers(smp: DepthSamples, squares: str, intr: np.ndarray, convention: str,
+                   white: Plane | None = None) -> DepthSamples:
+    """The samples on ``squares`` that are RANSAC inliers to their plane (``white``: the white
+    squares' plane, where it was fitted already)."""
+    if squares == "all":
+        return smp.subset(fit_samples(smp, intr, convention).inliers)
+    smp = smp.subset(~smp.black)
+    plane = white if white is not None else fit_samples(smp, intr, convention)
+    return smp.subset(plane.inliers)
 
 
 def _wiggles(model: Model) -> bool:
@@ -432,7 +448,7 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
     counts with its corners, and the notes say so."""
     asked = options.depth_convention
     convention = "z" if asked == "auto" else asked
-    sampled = "all" if options.plane_squares == "auto" else options.plane_squares
+    sampled = _drawn_squares(options)
     samples: list[DepthSamples | None] = []
     failed = {}
     for k, v in enumerate(prepared):
@@ -476,10 +492,7 @@ def _plane_samples(prepared: list[Prepared], board: Board, intr: np.ndarray, cor
     # squares' were found above).
     for k, smp in enumerate(samples):
         if smp is not None:
-            if squares == "all":
-                samples[k] = smp.subset(fit_samples(smp, intr, convention).inliers)
-            else:
-                samples[k] = smp.subset(~smp.black).subset(white[k].inliers)
+            samples[k] = _plane_inliers(smp, squares, intr, convention, white[k])
     return PlaneSamples(samples, width), squares, convention, reasons
 
 
@@ -764,9 +777,9 @@ def _calibrate(views, board, image_size, options: CalibrationOptions, progress) 
         fit, free, model, depths, planes, observations = choose_and_fit(prepared, plane_samples, obj, observations,
                                                                         fit.state, True, options, say, model, free)
         corners = _lens_reference(corners, model, fit.state, convention)
-    drawn = "all" if options.plane_squares == "auto" else options.plane_squares
     bordered, border_why = (None, UNBORDERED_WIGGLE) if _wiggles(model) else \
-        _bordered(prepared, board, plane_samples, drawn, squares, fit.state.intrinsics, convention, image_size[0])
+        _bordered(prepared, board, plane_samples, _drawn_squares(options), squares, fit.state.intrinsics, convention,
+                  image_size[0])
     say(border_why)
 
     def on_border(fitted: Fitted) -> Fitted:
